@@ -1,0 +1,644 @@
+"""Scene inputs: Config, Camera, the structure-of-arrays light and object stores, validation.
+
+Takes the keyword arrays of DESIGN section 7 (``set_lights(id=..., position=...)``) and
+returns stores whose rows are sorted by ascending id, so a row index is the ``light_index``
+of DESIGN section 3 and ties "to the lower id" are ties to the lower row.
+
+Validation follows DESIGN sections 1 and 3 ("Details every implementation must agree on"):
+every field is checked in the table order of section 1, the first failing field is named
+with the first failing row of that call, and nothing is stored until every check passed.
+Directions are normalised here, once, so the fast path and the oracle see the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+UINT32_MAX = 0xFFFFFFFF
+INT32_MAX = 2**31 - 1
+MAX_CAMERAS = 8
+
+POINT, SPOT, DIRECTIONAL = 0, 1, 2
+
+# Fade states (DESIGN section 2, "Fade").
+OFF, FADING_IN, ON, FADING_OUT = 0, 1, 2, 3
+
+
+class ValidationError(ValueError):
+    """Bad input: names the field and the first offending index (None when no row applies)."""
+
+    def __init__(self, field: str, index: int | None, message: str) -> None:
+        self.field = field
+        self.index = index
+        self.message = message
+        where = field if index is None else f"{field}[{index}]"
+        super().__init__(f"{where}: {message}")
+
+
+# --------------------------------------------------------------------------- config
+
+
+def _check_real(name: str, value: Any, lo: float | None = None, lo_open: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValidationError(name, None, f"must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValidationError(name, None, "must be finite")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ValidationError(name, None, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+    return v
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValidationError(name, None, f"must be an integer, got {value!r}")
+    if not lo <= int(value) <= hi:
+        raise ValidationError(name, None, f"must be in {lo}..{hi}, got {value}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Per-scheduler settings; names and defaults are DESIGN section 1's."""
+
+    max_lights: int = 8
+    model: str = "contribution"
+    w_ecc: float = 1.0
+    w_dist: float = -0.01
+    w_obj: float = -0.1
+    w_int: float = 0.1
+    c1: float = 0.25
+    hysteresis: float = 0.1
+    hysteresis_abs: float = 0.0
+    fade_in: float = 0.25
+    fade_out: float = 0.25
+    directional_in_slots: bool = False
+    shadow_budget: int = 4
+    cascades: int = 4
+    shadow_distance: float = 150.0
+    cascade_overlap: float = 0.1
+    max_shadowed_per_object: int | None = None  # None means min(2, max_lights)
+    unshadowed: str = "light"
+    precision: str = "exact"
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        k = _check_int("max_lights", self.max_lights, 1, 32)
+        set_(self, "max_lights", k)
+        if self.model not in ("contribution", "thesis"):
+            raise ValidationError("model", None, f"must be 'contribution' or 'thesis', got {self.model!r}")
+        for name in ("w_ecc", "w_dist", "w_obj", "w_int"):
+            set_(self, name, _check_real(name, getattr(self, name)))
+        set_(self, "c1", _check_real("c1", self.c1, 0.0, lo_open=True))
+        for name in ("hysteresis", "hysteresis_abs", "fade_in", "fade_out"):
+            set_(self, name, _check_real(name, getattr(self, name), 0.0))
+        if not isinstance(self.directional_in_slots, (bool, np.bool_)):
+            raise ValidationError("directional_in_slots", None, "must be a boolean")
+        set_(self, "directional_in_slots", bool(self.directional_in_slots))
+        set_(self, "shadow_budget", _check_int("shadow_budget", self.shadow_budget, 0, 127))
+        set_(self, "cascades", _check_int("cascades", self.cascades, 1, 4))
+        set_(self, "shadow_distance",
+             _check_real("shadow_distance", self.shadow_distance, 0.0, lo_open=True))
+        set_(self, "cascade_overlap", _check_real("cascade_overlap", self.cascade_overlap, 0.0))
+        mspo = min(2, k) if self.max_shadowed_per_object is None else self.max_shadowed_per_object
+        set_(self, "max_shadowed_per_object", _check_int("max_shadowed_per_object", mspo, 0, k))
+        if self.unshadowed not in ("light", "skip"):
+            raise ValidationError("unshadowed", None, f"must be 'light' or 'skip', got {self.unshadowed!r}")
+        if self.precision not in ("exact", "fast"):
+            raise ValidationError("precision", None, f"must be 'exact' or 'fast', got {self.precision!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+# --------------------------------------------------------------------------- cameras
+
+
+@dataclass
+class Camera:
+    """One view (DESIGN section 1). Vectors are float64[3]; focus is NDC (x, y)."""
+
+    position: Any
+    forward: Any
+    up: Any
+    fov_y: float
+    aspect: float
+    near: float
+    far: float
+    focus: Any = (0.0, 0.0)
+    height_px: float = 1080.0
+    id: int = 0
+
+
+_CAMERA_FIELDS = ("id", "position", "forward", "up", "fov_y", "aspect", "near", "far",
+                  "focus", "height_px")
+
+
+def _camera_vector(name: str, i: int, value: Any, n: int) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValidationError(f"cameras.{name}", i, "must be numeric") from None
+    if a.shape != (n,):
+        raise ValidationError(f"cameras.{name}", i, f"must have shape ({n},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValidationError(f"cameras.{name}", i, "must be finite")
+    return a.copy()
+
+
+def validate_cameras(cameras: Any) -> list[Camera]:
+    """Returns validated copies (numpy vectors, float scalars) of 1..8 cameras.
+
+    Accepts Camera instances or mappings with Camera's field names. The error field is
+    ``cameras.<field>`` and the index the camera's position in the list.
+    """
+    if isinstance(cameras, (Camera, dict)):
+        cameras = [cameras]
+    try:
+        cams = list(cameras)
+    except TypeError:
+        raise ValidationError("cameras", None, "must be a list of cameras") from None
+    if not 1 <= len(cams) <= MAX_CAMERAS:
+        raise ValidationError("cameras", None, f"need 1..{MAX_CAMERAS} cameras, got {len(cams)}")
+    out: list[Camera] = []
+    seen: set[int] = set()
+    for i, c in enumerate(cams):
+        if isinstance(c, dict):
+            unknown = set(c) - set(_CAMERA_FIELDS)
+            if unknown:
+                raise ValidationError(f"cameras.{sorted(unknown)[0]}", i, "unknown field")
+            missing = [f for f in _CAMERA_FIELDS[1:8] if f not in c]
+            if missing:
+                raise ValidationError(f"cameras.{missing[0]}", i, "required")
+            c = Camera(**c)
+        elif not isinstance(c, Camera):
+            raise ValidationError("cameras", i, f"must be a Camera or a mapping, got {type(c).__name__}")
+        cid = c.id
+        if isinstance(cid, bool) or not isinstance(cid, (int, np.integer)) or not 0 <= cid <= INT32_MAX:
+            raise ValidationError("cameras.id", i, "must be a non-negative int32")
+        if int(cid) in seen:
+            raise ValidationError("cameras.id", i, f"duplicate camera id {cid}")
+        seen.add(int(cid))
+        pos = _camera_vector("position", i, c.position, 3)
+        fwd = _camera_vector("forward", i, c.forward, 3)
+        if not np.any(fwd != 0.0):
+            raise ValidationError("cameras.forward", i, "must not be zero")
+        up = _camera_vector("up", i, c.up, 3)
+        fn = fwd / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
+        cr = np.cross(fn, up)
+        upn = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2])
+        if upn == 0.0 or math.sqrt(cr @ cr) <= 1e-9 * upn:
+            raise ValidationError("cameras.up", i, "must be non-zero and not parallel to forward")
+        vals = {}
+        for name in ("fov_y", "aspect", "near", "far", "height_px"):
+            try:
+                v = float(getattr(c, name))
+            except (TypeError, ValueError):
+                raise ValidationError(f"cameras.{name}", i, "must be a number") from None
+            if not math.isfinite(v):
+                raise ValidationError(f"cameras.{name}", i, "must be finite")
+            vals[name] = v
+        if not 0.0 < vals["fov_y"] < math.pi:
+            raise ValidationError("cameras.fov_y", i, "must be in (0, pi)")
+        if not vals["aspect"] > 0.0:
+            raise ValidationError("cameras.aspect", i, "must be > 0")
+        if not vals["near"] > 0.0:
+            raise ValidationError("cameras.near", i, "must be > 0")
+        if not vals["far"] > vals["near"]:
+            raise ValidationError("cameras.far", i, "must be > near")
+        focus = _camera_vector("focus", i, c.focus, 2)
+        if np.any(np.abs(focus) > 1.0):
+            raise ValidationError("cameras.focus", i, "must be in [-1, 1]^2")
+        if not vals["height_px"] > 0.0:
+            raise ValidationError("cameras.height_px", i, "must be > 0")
+        out.append(Camera(position=pos, forward=fwd, up=up, focus=focus, id=int(cid), **vals))
+    return out
+
+
+def validate_dt(dt: Any) -> float:
+    return _check_real("dt", dt, 0.0)
+
+
+# --------------------------------------------------------------------------- field parsing
+
+
+def _first_bad(mask: np.ndarray) -> int | None:
+    """Index of the first True row of a per-row mask (rows may have trailing axes)."""
+    if mask.ndim > 1:
+        mask = mask.reshape(mask.shape[0], -1).any(axis=1)
+    idx = np.flatnonzero(mask)
+    return int(idx[0]) if idx.size else None
+
+
+def _parse(name: str, value: Any, n: int, kind: str, width: int = 0) -> np.ndarray:
+    """Converts one keyword array; checks shape (never broadcast), numeric kind, finiteness."""
+    try:
+        raw = np.asarray(value)
+    except Exception:  # noqa: BLE001 - anything numpy cannot take is a bad field
+        raise ValidationError(name, None, "is not an array") from None
+    shape = (n, width) if width else (n,)
+    if raw.ndim != len(shape) or (width and raw.shape[1] != width):
+        raise ValidationError(name, None, f"must have shape {_shape_str(shape)}, got {raw.shape}")
+    if raw.shape[0] != n:
+        raise ValidationError(name, min(raw.shape[0], n),
+                              f"has {raw.shape[0]} rows, id has {n}")
+    if n == 0:
+        return np.zeros(shape, dtype={"f": np.float64, "b": np.bool_}.get(kind, np.int64))
+    if raw.dtype.kind not in "biuf":
+        raise ValidationError(name, 0, f"must be numeric, got dtype {raw.dtype}")
+    if kind == "f":
+        a = raw.astype(np.float64)
+        bad = _first_bad(~np.isfinite(a))
+        if bad is not None:
+            raise ValidationError(name, bad, "must be finite")
+        return a
+    if kind == "b":
+        if raw.dtype.kind == "f":
+            bad = _first_bad(~np.isin(raw, (0.0, 1.0)))
+            if bad is not None:
+                raise ValidationError(name, bad, "must be a boolean")
+        elif raw.dtype.kind in "iu":
+            bad = _first_bad((raw != 0) & (raw != 1))
+            if bad is not None:
+                raise ValidationError(name, bad, "must be a boolean")
+        return raw.astype(np.bool_)
+    # integers
+    if raw.dtype.kind == "f":
+        bad = _first_bad(~np.isfinite(raw) | (raw != np.floor(raw)))
+        if bad is not None:
+            raise ValidationError(name, bad, "must be an integer")
+    if raw.dtype.kind == "b":
+        raise ValidationError(name, 0, "must be an integer, got booleans")
+    if raw.dtype.kind == "u" or raw.dtype.kind == "i":
+        return raw.astype(np.int64) if raw.dtype != np.uint64 else _u64_checked(name, raw)
+    return raw.astype(np.int64)
+
+
+def _u64_checked(name: str, raw: np.ndarray) -> np.ndarray:
+    bad = _first_bad(raw > np.uint64(2**62))
+    if bad is not None:
+        raise ValidationError(name, bad, "out of range")
+    return raw.astype(np.int64)
+
+
+def _shape_str(shape: tuple[int, ...]) -> str:
+    return "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def _check_ids(ids: np.ndarray) -> np.ndarray:
+    bad = _first_bad((ids < 0) | (ids > INT32_MAX))
+    if bad is not None:
+        raise ValidationError("id", bad, "must be a non-negative int32")
+    ids = ids.astype(np.int32)
+    _check_unique(ids)
+    return ids
+
+
+def _check_unique(ids: np.ndarray) -> None:
+    if ids.size < 2:
+        return
+    order = np.argsort(ids, kind="stable")
+    s = ids[order]
+    dup = np.flatnonzero(s[1:] == s[:-1])
+    if dup.size:
+        # The first row (in call order) that repeats an earlier id.
+        later = order[dup + 1]
+        raise ValidationError("id", int(later.min()), "duplicate id")
+
+
+def _check_mask(name: str, a: np.ndarray) -> np.ndarray:
+    bad = _first_bad((a < 0) | (a > UINT32_MAX))
+    if bad is not None:
+        raise ValidationError(name, bad, "must be a uint32")
+    return a.astype(np.uint32)
+
+
+def _normalise(d: np.ndarray) -> np.ndarray:
+    """Row-wise d / |d| with |d| = sqrt(x*x + y*y + z*z); zero rows stay zero."""
+    n = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    out = d.copy()
+    nz = n > 0.0
+    out[nz] = d[nz] / n[nz, None]
+    return out
+
+
+# --------------------------------------------------------------------------- stores
+
+LIGHT_FIELDS = ("id", "type", "position", "radius", "direction", "outer_angle", "inner_angle",
+                "intensity", "priority", "shadows", "mask")
+OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "casts_shadows", "mask", "static")
+
+
+def _id_rows(store_ids: np.ndarray, ids_in: Any, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validates ids of an update_/remove_ call; returns (ids, store rows)."""
+    if ids_in is None:
+        raise ValidationError("id", None, "required")
+    ids = _check_ids(_parse("id", ids_in, _len_of("id", ids_in), "i"))
+    rows = np.searchsorted(store_ids, ids)
+    rows_c = np.minimum(rows, max(store_ids.size - 1, 0))
+    known = (rows < store_ids.size) & (store_ids[rows_c] == ids) if store_ids.size else \
+        np.zeros(ids.size, dtype=bool)
+    bad = _first_bad(~known)
+    if bad is not None:
+        raise ValidationError("id", bad, f"unknown {what} id {int(ids[bad])}")
+    return ids, rows
+
+
+def _len_of(name: str, value: Any) -> int:
+    try:
+        a = np.asarray(value)
+    except Exception:  # noqa: BLE001
+        raise ValidationError(name, None, "is not an array") from None
+    if a.ndim != 1:
+        raise ValidationError(name, None, f"must be one-dimensional, got shape {a.shape}")
+    return a.shape[0]
+
+
+@dataclass
+class LightStore:
+    """Lights as structure of arrays, rows in ascending id (DESIGN section 1, Light)."""
+
+    id: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    type: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+    position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    direction: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    outer_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    inner_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    intensity: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    priority: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    shadows: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
+    mask: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
+    version: int = 0
+
+    def __len__(self) -> int:
+        return int(self.id.size)
+
+    def columns(self, rows: np.ndarray | slice = slice(None)) -> dict[str, np.ndarray]:
+        return {f: getattr(self, f)[rows].copy() for f in LIGHT_FIELDS}
+
+    @staticmethod
+    def validate(given: dict[str, Any], base: dict[str, np.ndarray] | None, n: int
+                 ) -> dict[str, np.ndarray]:
+        """Checks the fields in table order; ``base`` holds current rows for an update."""
+        unknown = [k for k in given if k not in LIGHT_FIELDS]
+        if unknown:
+            raise ValidationError(unknown[0], None, "unknown light field")
+        cols: dict[str, np.ndarray] = {}
+        kinds = {"id": "i", "type": "i", "position": "f", "radius": "f", "direction": "f",
+                 "outer_angle": "f", "inner_angle": "f", "intensity": "f", "priority": "f",
+                 "shadows": "b", "mask": "i"}
+        widths = {"position": 3, "direction": 3}
+        for name in LIGHT_FIELDS:
+            if name in given and given[name] is not None:
+                cols[name] = _parse(name, given[name], n, kinds[name], widths.get(name, 0))
+            elif base is not None:
+                cols[name] = base[name]
+            if name == "id":
+                cols["id"] = _check_ids(cols["id"]) if base is None else cols["id"]
+            elif name == "type":
+                t = cols.get("type")
+                if t is None:
+                    t = cols["type"] = np.zeros(n, np.uint8)
+                bad = _first_bad((t < 0) | (t > 2))
+                if bad is not None:
+                    raise ValidationError("type", bad, "unknown light type (0 point, 1 spot, 2 directional)")
+                cols["type"] = t.astype(np.uint8)
+            elif name in ("position", "radius"):
+                needs = cols["type"] != DIRECTIONAL
+                if name not in cols:
+                    bad = _first_bad(needs)
+                    if bad is not None:
+                        raise ValidationError(name, bad, "required for point and spot lights")
+                    cols[name] = np.zeros((n, 3)) if name == "position" else np.zeros(n)
+                if name == "radius":
+                    bad = _first_bad(needs & ~(cols["radius"] > 0.0))
+                    if bad is not None:
+                        raise ValidationError("radius", bad, "must be > 0 on point and spot lights")
+            elif name == "direction":
+                needs = cols["type"] != POINT
+                if "direction" not in cols:
+                    bad = _first_bad(needs)
+                    if bad is not None:
+                        raise ValidationError("direction", bad, "required for spot and directional lights")
+                    cols["direction"] = np.zeros((n, 3))
+                d = cols["direction"]
+                zero = ~np.any(d != 0.0, axis=1)
+                bad = _first_bad(needs & zero)
+                if bad is not None:
+                    raise ValidationError("direction", bad, "must not be zero")
+                if "direction" in given:
+                    try:
+                        with np.errstate(over="raise"):
+                            cols["direction"] = _normalise(d)
+                    except FloatingPointError:
+                        raise ValidationError("direction", _first_bad(np.abs(d) > 1e150),
+                                              "too large to normalise") from None
+            elif name == "outer_angle":
+                if "outer_angle" not in cols:
+                    cols["outer_angle"] = np.full(n, math.pi / 4)
+                o = cols["outer_angle"]
+                bad = _first_bad((cols["type"] == SPOT) & ~((o > 0.0) & (o < math.pi / 2)))
+                if bad is not None:
+                    raise ValidationError("outer_angle", bad, "must be in (0, pi/2) on spot lights")
+            elif name == "inner_angle":
+                if "inner_angle" not in cols:
+                    cols["inner_angle"] = 0.8 * cols["outer_angle"]
+                inner = cols["inner_angle"]
+                bad = _first_bad((cols["type"] == SPOT)
+                                 & ~((inner >= 0.0) & (inner <= cols["outer_angle"])))
+                if bad is not None:
+                    raise ValidationError("inner_angle", bad, "must be in [0, outer_angle] on spot lights")
+            elif name == "intensity":
+                if "intensity" not in cols:
+                    cols["intensity"] = np.ones(n)
+                bad = _first_bad(cols["intensity"] < 0.0)
+                if bad is not None:
+                    raise ValidationError("intensity", bad, "must be >= 0")
+            elif name == "priority":
+                cols.setdefault("priority", np.zeros(n))
+            elif name == "shadows":
+                cols.setdefault("shadows", np.zeros(n, np.bool_))
+            elif name == "mask":
+                cols["mask"] = (_check_mask("mask", cols["mask"]) if "mask" in cols
+                                else np.full(n, UINT32_MAX, np.uint32))
+        return cols
+
+    def assign(self, cols: dict[str, np.ndarray]) -> None:
+        order = np.argsort(cols["id"], kind="stable")
+        for f in LIGHT_FIELDS:
+            setattr(self, f, np.ascontiguousarray(cols[f][order]))
+        self.version += 1
+
+
+@dataclass
+class ObjectStore:
+    """Objects as structure of arrays, rows in ascending id (DESIGN section 1, Object).
+
+    ``state`` holds per-row arrays owned by a scheduler (fade slots, last frame's selection);
+    they follow their ids through set_/remove_ calls. ``is_new`` marks rows added since the
+    last frame (an id removed and set again counts as new).
+    """
+
+    id: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    bounds_min: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    bounds_max: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    casts_shadows: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
+    mask: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
+    static: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
+    is_new: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
+    state: dict[str, tuple[np.ndarray, Any]] = field(default_factory=dict)
+    version: int = 0
+
+    def __len__(self) -> int:
+        return int(self.id.size)
+
+    def columns(self, rows: np.ndarray | slice = slice(None)) -> dict[str, np.ndarray]:
+        return {f: getattr(self, f)[rows].copy() for f in OBJECT_FIELDS}
+
+    def add_state(self, name: str, tail: tuple[int, ...], dtype: Any, fill: Any) -> None:
+        self.state[name] = (np.full((len(self),) + tail, fill, dtype=dtype), fill)
+
+    def get(self, name: str) -> np.ndarray:
+        return self.state[name][0]
+
+    def put(self, name: str, value: np.ndarray) -> None:
+        self.state[name] = (value, self.state[name][1])
+
+    @staticmethod
+    def validate(given: dict[str, Any], base: dict[str, np.ndarray] | None, n: int
+                 ) -> dict[str, np.ndarray]:
+        unknown = [k for k in given if k not in OBJECT_FIELDS]
+        if unknown:
+            raise ValidationError(unknown[0], None, "unknown object field")
+        kinds = {"id": "i", "bounds_min": "f", "bounds_max": "f", "casts_shadows": "b",
+                 "mask": "i", "static": "b"}
+        cols: dict[str, np.ndarray] = {}
+        for name in OBJECT_FIELDS:
+            if name in given and given[name] is not None:
+                cols[name] = _parse(name, given[name], n, kinds[name],
+                                    3 if name.startswith("bounds") else 0)
+            elif base is not None:
+                cols[name] = base[name]
+            if name == "id":
+                cols["id"] = _check_ids(cols["id"]) if base is None else cols["id"]
+            elif name in ("bounds_min", "bounds_max") and name not in cols:
+                raise ValidationError(name, None, "required")
+            elif name == "bounds_max":
+                bad = _first_bad(cols["bounds_min"] > cols["bounds_max"])
+                if bad is not None:
+                    raise ValidationError("bounds_min", bad, "must be <= bounds_max")
+            elif name == "casts_shadows":
+                cols.setdefault("casts_shadows", np.ones(n, np.bool_))
+            elif name == "mask":
+                cols["mask"] = (_check_mask("mask", cols["mask"]) if "mask" in cols
+                                else np.full(n, UINT32_MAX, np.uint32))
+            elif name == "static":
+                cols.setdefault("static", np.zeros(n, np.bool_))
+        return cols
+
+    def assign(self, cols: dict[str, np.ndarray]) -> None:
+        """Replaces the object set; per-row state of kept ids survives."""
+        order = np.argsort(cols["id"], kind="stable")
+        new_ids = cols["id"][order]
+        old_ids = self.id
+        pos = np.searchsorted(old_ids, new_ids)
+        pos_c = np.minimum(pos, max(old_ids.size - 1, 0))
+        kept = (pos < old_ids.size) & (old_ids[pos_c] == new_ids) if old_ids.size else \
+            np.zeros(new_ids.size, dtype=bool)
+        for name, (arr, fill) in self.state.items():
+            new = np.full((new_ids.size,) + arr.shape[1:], fill, dtype=arr.dtype)
+            new[kept] = arr[pos_c[kept]]
+            self.state[name] = (new, fill)
+        new_flag = np.ones(new_ids.size, np.bool_)
+        new_flag[kept] = self.is_new[pos_c[kept]]
+        for f in OBJECT_FIELDS:
+            setattr(self, f, np.ascontiguousarray(cols[f][order]))
+        self.is_new = new_flag
+        self.version += 1
+
+    def keep_rows(self, keep: np.ndarray) -> None:
+        for f in OBJECT_FIELDS:
+            setattr(self, f, getattr(self, f)[keep])
+        self.is_new = self.is_new[keep]
+        for name, (arr, fill) in self.state.items():
+            self.state[name] = (arr[keep], fill)
+        self.version += 1
+
+
+class SceneAPI:
+    """The set_/update_/remove_/frame surface of DESIGN section 7, shared by the fast
+    Scheduler and the oracle's; subclasses implement ``_frame``.
+
+    Every call validates everything first and only then mutates, so a rejected call
+    leaves the scheduler exactly as it was.
+    """
+
+    def __init__(self, config: Config | None = None) -> None:
+        if config is None:
+            config = Config()
+        if not isinstance(config, Config):
+            raise ValidationError("config", None, "must be a lightsched.Config")
+        self.config = config
+        self.lights = LightStore()
+        self.objects = ObjectStore()
+        self.frame_index = 0
+
+    # lights
+    def set_lights(self, **fields: Any) -> None:
+        n = _len_of("id", fields.get("id", None)) if "id" in fields else None
+        if n is None:
+            raise ValidationError("id", None, "required")
+        self.lights.assign(LightStore.validate(fields, None, n))
+
+    def update_lights(self, **fields: Any) -> None:
+        ids, rows = _id_rows(self.lights.id, fields.pop("id", None), "light")
+        cols = LightStore.validate(fields, self.lights.columns(rows), ids.size)
+        for f in LIGHT_FIELDS[1:]:
+            getattr(self.lights, f)[rows] = cols[f]
+        self.lights.version += 1
+
+    def remove_lights(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
+        _, rows = _id_rows(self.lights.id, id, "light")
+        keep = np.ones(len(self.lights), bool)
+        keep[rows] = False
+        self.lights.assign(self.lights.columns(keep))
+
+    # objects
+    def set_objects(self, **fields: Any) -> None:
+        n = _len_of("id", fields.get("id", None)) if "id" in fields else None
+        if n is None:
+            raise ValidationError("id", None, "required")
+        self.objects.assign(ObjectStore.validate(fields, None, n))
+
+    def update_objects(self, **fields: Any) -> None:
+        ids, rows = _id_rows(self.objects.id, fields.pop("id", None), "object")
+        cols = ObjectStore.validate(fields, self.objects.columns(rows), ids.size)
+        for f in OBJECT_FIELDS[1:]:
+            getattr(self.objects, f)[rows] = cols[f]
+        self.objects.version += 1
+
+    def remove_objects(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
+        _, rows = _id_rows(self.objects.id, id, "object")
+        keep = np.ones(len(self.objects), bool)
+        keep[rows] = False
+        self.objects.keep_rows(keep)
+
+    def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False) -> Any:
+        """Steps one frame (DESIGN section 2) and returns its Frame (section 3)."""
+        cams = validate_cameras(cameras)
+        dt_ = validate_dt(dt)
+        if not isinstance(cut, (bool, np.bool_)):
+            raise ValidationError("cut", None, "must be a boolean")
+        result = self._frame(cams, dt_, bool(cut))
+        self.objects.is_new[:] = False
+        self.frame_index += 1
+        return result
+
+    def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Any:
+        raise NotImplementedError
