@@ -186,16 +186,24 @@ def validate_cameras(cameras: Any) -> list[Camera]:
         seen.add(int(cid))
         pos = _camera_vector("position", i, c.position, 3)
         fwd = _camera_vector("forward", i, c.forward, 3)
-        if not np.any(fwd != 0.0):
-            raise ValidationError("cameras.forward", i, "must not be zero")
+        fwd_n = float(_norm3(fwd[None])[0])
+        if not 0.0 < fwd_n < math.inf:
+            raise ValidationError("cameras.forward", i, "must have a non-zero length that "
+                                  "sqrt(x*x + y*y + z*z) can represent")
         up = _camera_vector("up", i, c.up, 3)
-        fn = fwd / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
+        fn = fwd / fwd_n
         cr = np.cross(fn, up)
-        upn = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2])
-        if upn == 0.0 or math.sqrt(cr @ cr) <= 1e-9 * upn:
+        upn = float(_norm3(up[None])[0])
+        if not 0.0 < upn < math.inf or float(_norm3(cr[None])[0]) <= 1e-9 * upn:
             raise ValidationError("cameras.up", i, "must be non-zero and not parallel to forward")
         vals = {}
-        for name in ("fov_y", "aspect", "near", "far", "height_px"):
+        # Each field is parsed and range-checked before the next one (table order).
+        for name in ("fov_y", "aspect", "near", "far", "focus", "height_px"):
+            if name == "focus":
+                focus = _camera_vector("focus", i, c.focus, 2)
+                if np.any(np.abs(focus) > 1.0):
+                    raise ValidationError("cameras.focus", i, "must be in [-1, 1]^2")
+                continue
             try:
                 v = float(getattr(c, name))
             except (TypeError, ValueError):
@@ -203,19 +211,11 @@ def validate_cameras(cameras: Any) -> list[Camera]:
             if not math.isfinite(v):
                 raise ValidationError(f"cameras.{name}", i, "must be finite")
             vals[name] = v
-        if not 0.0 < vals["fov_y"] < math.pi:
-            raise ValidationError("cameras.fov_y", i, "must be in (0, pi)")
-        if not vals["aspect"] > 0.0:
-            raise ValidationError("cameras.aspect", i, "must be > 0")
-        if not vals["near"] > 0.0:
-            raise ValidationError("cameras.near", i, "must be > 0")
-        if not vals["far"] > vals["near"]:
-            raise ValidationError("cameras.far", i, "must be > near")
-        focus = _camera_vector("focus", i, c.focus, 2)
-        if np.any(np.abs(focus) > 1.0):
-            raise ValidationError("cameras.focus", i, "must be in [-1, 1]^2")
-        if not vals["height_px"] > 0.0:
-            raise ValidationError("cameras.height_px", i, "must be > 0")
+            ok = {"fov_y": 0.0 < v < math.pi, "aspect": v > 0.0, "near": v > 0.0,
+                  "far": v > vals.get("near", 0.0), "height_px": v > 0.0}[name]
+            if not ok:
+                rule = {"fov_y": "be in (0, pi)", "far": "be > near"}.get(name, "be > 0")
+                raise ValidationError(f"cameras.{name}", i, f"must {rule}")
         out.append(Camera(position=pos, forward=fwd, up=up, focus=focus, id=int(cid), **vals))
     return out
 
@@ -250,7 +250,8 @@ def _parse(name: str, value: Any, n: int, kind: str, width: int = 0) -> np.ndarr
     if n == 0:
         return np.zeros(shape, dtype={"f": np.float64, "b": np.bool_}.get(kind, np.int64))
     if raw.dtype.kind not in "biuf":
-        raise ValidationError(name, 0, f"must be numeric, got dtype {raw.dtype}")
+        raise ValidationError(name, _first_non_numeric(raw),
+                              f"must be numeric, got dtype {raw.dtype}")
     if kind == "f":
         a = raw.astype(np.float64)
         bad = _first_bad(~np.isfinite(a))
@@ -272,11 +273,28 @@ def _parse(name: str, value: Any, n: int, kind: str, width: int = 0) -> np.ndarr
         bad = _first_bad(~np.isfinite(raw) | (raw != np.floor(raw)))
         if bad is not None:
             raise ValidationError(name, bad, "must be an integer")
+        bad = _first_bad(np.abs(raw) > 2.0**62)  # before the cast, which would wrap
+        if bad is not None:
+            raise ValidationError(name, bad, "out of range")
     if raw.dtype.kind == "b":
         raise ValidationError(name, 0, "must be an integer, got booleans")
     if raw.dtype.kind == "u" or raw.dtype.kind == "i":
         return raw.astype(np.int64) if raw.dtype != np.uint64 else _u64_checked(name, raw)
     return raw.astype(np.int64)
+
+
+def _first_non_numeric(raw: np.ndarray) -> int:
+    """First row of a non-numeric array (e.g. an int beyond 64 bits made it dtype object)
+    holding an element numpy cannot take as a number; 0 when every row is alike."""
+    if raw.dtype.kind == "O":
+        for i, row in enumerate(raw.reshape(raw.shape[0], -1)):
+            for v in row:
+                try:
+                    if np.asarray(v).dtype.kind not in "biuf":
+                        return i
+                except Exception:  # noqa: BLE001
+                    return i
+    return 0
 
 
 def _u64_checked(name: str, raw: np.ndarray) -> np.ndarray:
@@ -318,12 +336,19 @@ def _check_mask(name: str, a: np.ndarray) -> np.ndarray:
     return a.astype(np.uint32)
 
 
+def _norm3(d: np.ndarray) -> np.ndarray:
+    """Row-wise |d| = sqrt(x*x + y*y + z*z); 0 on underflow, inf on overflow."""
+    with np.errstate(over="ignore", under="ignore"):
+        return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+
+
 def _normalise(d: np.ndarray) -> np.ndarray:
-    """Row-wise d / |d| with |d| = sqrt(x*x + y*y + z*z); zero rows stay zero."""
-    n = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    """Row-wise d / |d| with |d| = sqrt(x*x + y*y + z*z); rows whose |d| is 0 or inf stay
+    as given (only rows whose type ignores direction can have them)."""
+    n = _norm3(d)
     out = d.copy()
-    nz = n > 0.0
-    out[nz] = d[nz] / n[nz, None]
+    ok = (n > 0.0) & (n < np.inf)
+    out[ok] = d[ok] / n[ok, None]
     return out
 
 
@@ -428,17 +453,15 @@ class LightStore:
                         raise ValidationError("direction", bad, "required for spot and directional lights")
                     cols["direction"] = np.zeros((n, 3))
                 d = cols["direction"]
-                zero = ~np.any(d != 0.0, axis=1)
-                bad = _first_bad(needs & zero)
+                # Judged by |d| = sqrt(x*x + y*y + z*z): a length that under- or overflows
+                # cannot be normalised (rows that ignore direction keep it as given).
+                norm = _norm3(d)
+                bad = _first_bad(needs & ~((norm > 0.0) & (norm < np.inf)))
                 if bad is not None:
-                    raise ValidationError("direction", bad, "must not be zero")
+                    raise ValidationError("direction", bad, "must have a non-zero length that "
+                                          "sqrt(x*x + y*y + z*z) can represent")
                 if "direction" in given:
-                    try:
-                        with np.errstate(over="raise"):
-                            cols["direction"] = _normalise(d)
-                    except FloatingPointError:
-                        raise ValidationError("direction", _first_bad(np.abs(d) > 1e150),
-                                              "too large to normalise") from None
+                    cols["direction"] = _normalise(d)
             elif name == "outer_angle":
                 if "outer_angle" not in cols:
                     cols["outer_angle"] = np.full(n, math.pi / 4)

@@ -1,0 +1,147 @@
+"""Camera frames, frustum planes and visibility (DESIGN section 2, "Camera frame", "Tests",
+"Visibility").
+
+Takes validated cameras and the light/object stores; returns per camera the basis (f, r, u),
+t_x, t_y and six planes as (inward unit normal, point) pairs, and per light / per object a
+visibility flag. Signed distances are n . (x - point) summed x, y, z in that order, so the
+results are bit-identical to the oracle and translation-invariant on the 2^-16 m grid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .scene import DIRECTIONAL, Camera
+
+
+def _normalize(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
+def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+class CameraFrames:
+    """Per camera basis and planes as float64 arrays.
+
+    basis [C, 3, 3] rows f, r, u; tan_xy [C, 2] = (t_x, t_y); position [C, 3];
+    plane_n [C, 6, 3] and plane_p [C, 6, 3] in the order near, far, left, right, bottom,
+    top; focus [C, 2]; height_px [C]; near_far [C, 2].
+    """
+
+    def __init__(self, cameras: list[Camera]) -> None:
+        c = len(cameras)
+        self.basis = np.zeros((c, 3, 3))
+        self.tan_xy = np.zeros((c, 2))
+        self.position = np.zeros((c, 3))
+        self.plane_n = np.zeros((c, 6, 3))
+        self.plane_p = np.zeros((c, 6, 3))
+        self.focus = np.zeros((c, 2))
+        self.height_px = np.zeros(c)
+        self.near_far = np.zeros((c, 2))
+        for k, cam in enumerate(cameras):
+            p = tuple(float(x) for x in cam.position)
+            f = _normalize(tuple(float(x) for x in cam.forward))
+            r = _normalize(_cross(f, tuple(float(x) for x in cam.up)))
+            u = _cross(r, f)
+            t_y = math.tan(cam.fov_y / 2)
+            t_x = cam.aspect * t_y
+            sx = math.sqrt(1 + t_x * t_x)
+            sy = math.sqrt(1 + t_y * t_y)
+            near_pt = tuple(p[i] + cam.near * f[i] for i in range(3))
+            far_pt = tuple(p[i] + cam.far * f[i] for i in range(3))
+            planes = (
+                (f, near_pt),
+                (tuple(-f[i] for i in range(3)), far_pt),
+                (tuple((r[i] + t_x * f[i]) / sx for i in range(3)), p),
+                (tuple((-r[i] + t_x * f[i]) / sx for i in range(3)), p),
+                (tuple((u[i] + t_y * f[i]) / sy for i in range(3)), p),
+                (tuple((-u[i] + t_y * f[i]) / sy for i in range(3)), p),
+            )
+            for j, (n, q) in enumerate(planes):
+                self.plane_n[k, j] = n
+                self.plane_p[k, j] = q
+            self.basis[k] = (f, r, u)
+            self.tan_xy[k] = (t_x, t_y)
+            self.position[k] = p
+            self.focus[k] = (float(cam.focus[0]), float(cam.focus[1]))
+            self.height_px[k] = cam.height_px
+            self.near_far[k] = (cam.near, cam.far)
+
+    def __len__(self) -> int:
+        return self.position.shape[0]
+
+
+def cascade_splits(cameras: list[Camera], cascades: int, shadow_distance: float) -> np.ndarray:
+    """z_0..z_C per camera: z_i = 0.5 near (D/near)^(i/C) + 0.5 (near + (D - near) i/C),
+    D = min(far, shadow_distance) (DESIGN section 2, "Casters", practical split scheme)."""
+    out = np.zeros((len(cameras), cascades + 1))
+    for k, cam in enumerate(cameras):
+        near = float(cam.near)
+        d = min(float(cam.far), shadow_distance)
+        for i in range(cascades + 1):
+            out[k, i] = 0.5 * near * (d / near) ** (i / cascades) + 0.5 * (
+                near + (d - near) * i / cascades)
+    return out
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def signed_distance(n: np.ndarray, q: np.ndarray, x0: float, x1: float, x2: float) -> float:
+    """n . (x - q), summed in x, y, z order (DESIGN "Tests")."""
+    return n[0] * (x0 - q[0]) + n[1] * (x1 - q[1]) + n[2] * (x2 - q[2])
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def ball_in_frustum(plane_n, plane_p, cam, x0, x1, x2, radius):
+    for j in range(6):
+        if signed_distance(plane_n[cam, j], plane_p[cam, j], x0, x1, x2) < -radius:
+            return False
+    return True
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def box_in_frustum(plane_n, plane_p, cam, lo, hi):
+    """The conservative AABB test: the corner farthest along n has distance >= 0."""
+    for j in range(6):
+        n = plane_n[cam, j]
+        c0 = hi[0] if n[0] >= 0.0 else lo[0]
+        c1 = hi[1] if n[1] >= 0.0 else lo[1]
+        c2 = hi[2] if n[2] >= 0.0 else lo[2]
+        if signed_distance(n, plane_p[cam, j], c0, c1, c2) < 0.0:
+            return False
+    return True
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
+    """visible[o] iff o's AABB is in at least one camera frustum."""
+    n = bounds_min.shape[0]
+    out = np.zeros(n, np.bool_)
+    for o in nb.prange(n):
+        for cam in range(plane_n.shape[0]):
+            if box_in_frustum(plane_n, plane_p, cam, bounds_min[o], bounds_max[o]):
+                out[o] = True
+                break
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def lights_visible(light_type, position, radius, plane_n, plane_p):
+    """Point/spot: the ball (position, r) is in some frustum; directional: always."""
+    n = light_type.shape[0]
+    out = np.zeros(n, np.bool_)
+    for j in range(n):
+        if light_type[j] == DIRECTIONAL:
+            out[j] = True
+            continue
+        for cam in range(plane_n.shape[0]):
+            if ball_in_frustum(plane_n, plane_p, cam, position[j, 0], position[j, 1],
+                               position[j, 2], radius[j]):
+                out[j] = True
+                break
+    return out

@@ -1,0 +1,148 @@
+"""The Affects test and the two priority models (DESIGN section 2, "Affects", "Priority").
+
+Takes a packed light row (see ``pack_lights``) and an object's box; returns whether the light
+affects the object and the pair's priority P. The per-pair functions are inlined into the
+fused object pass of pairs.py; this module owns their definitions.
+
+Packed light columns (float64 ``light_f[L, 16]``):
+  0-2 position, 3 radius, 4-6 axis (normalised direction), 7 cos(outer), 8 sin(outer),
+  9 cos(inner), 10 intensity i, 11 user priority p_user, 12 thesis camera term A,
+  13 inner == outer (1.0 / 0.0), 14 type.
+Integer columns (int64 ``light_i[L, 2]``): 0 mask, 1 id.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .frustum import CameraFrames
+from .scene import DIRECTIONAL, POINT, SPOT, LightStore
+
+R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
+MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
+
+
+@nb.njit(cache=True, nogil=True)
+def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
+          cam_pos, cam_basis, cam_tan, cam_focus, thesis_w):
+    n = typ.shape[0]
+    lf = np.zeros((n, 16))
+    li = np.zeros((n, 2), np.int64)
+    for j in range(n):
+        for k in range(3):
+            lf[j, k] = position[j, k]
+            lf[j, 4 + k] = direction[j, k]
+        lf[j, 3] = radius[j]
+        lf[j, 7] = math.cos(outer[j])
+        lf[j, 8] = math.sin(outer[j])
+        lf[j, 9] = math.cos(inner[j])
+        lf[j, 10] = intensity[j]
+        lf[j, 11] = prio[j]
+        lf[j, 13] = 1.0 if inner[j] == outer[j] else 0.0
+        lf[j, 14] = typ[j]
+        li[j, 0] = mask[j]
+        li[j, 1] = ids[j]
+        if typ[j] != DIRECTIONAL:
+            best = -np.inf
+            for c in range(cam_pos.shape[0]):
+                a = thesis_camera_term(position[j], radius[j], cam_pos[c], cam_basis[c],
+                                       cam_tan[c], cam_focus[c], thesis_w[0], thesis_w[1],
+                                       thesis_w[2])
+                if a > best:
+                    best = a
+            lf[j, 12] = best
+    return lf, li
+
+
+def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
+                c1: float) -> tuple[np.ndarray, np.ndarray]:
+    """Packs the light store into the row layout above (one cache-friendly row per light)."""
+    return _pack(lights.type, lights.position, lights.radius, lights.direction,
+                 lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
+                 lights.mask, lights.id, frames.position, frames.basis, frames.tan_xy,
+                 frames.focus, np.array([w_ecc, w_dist, c1]))
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
+    """w_ecc f + w_dist d_viewer for one camera (Eriksson eq. 3.1, Berka's eccentricity).
+
+    The rest of eq. 3.1 does not depend on the camera and rounding is monotone, so the
+    max over cameras of the whole sum equals the sum built on the max of this term.
+    theta = atan2(|g x v|, g . v), g the focal ray f + (x t_x) r + (y t_y) u.
+    """
+    v0 = p[0] - cam_p[0]
+    v1 = p[1] - cam_p[1]
+    v2 = p[2] - cam_p[2]
+    d_viewer = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if d_viewer <= r:
+        f = 1.0
+    else:
+        sx = focus[0] * tan_xy[0]
+        sy = focus[1] * tan_xy[1]
+        g0 = basis[0, 0] + sx * basis[1, 0] + sy * basis[2, 0]
+        g1 = basis[0, 1] + sx * basis[1, 1] + sy * basis[2, 1]
+        g2 = basis[0, 2] + sx * basis[1, 2] + sy * basis[2, 2]
+        x0 = g1 * v2 - g2 * v1
+        x1 = g2 * v0 - g0 * v2
+        x2 = g0 * v1 - g1 * v0
+        theta = math.atan2(math.sqrt(x0 * x0 + x1 * x1 + x2 * x2), g0 * v0 + g1 * v1 + g2 * v2)
+        alpha = math.asin(min(1.0, r / d_viewer))
+        f = 1.0 if theta <= alpha else math.exp(-(theta - alpha) / c1)
+    return w_ecc * f + w_dist * d_viewer
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def pair(lf, j, lo, hi, c0, c1, c2, big_r, e2, model, w_obj, w_int):
+    """(affects, P) of light row j and the box [lo, hi] with centre c, radius big_r and
+    squared diagonal e2. Masks and visibility are checked by the caller."""
+    typ = lf[j, 14]
+    if typ == DIRECTIONAL:
+        return True, lf[j, 10] + lf[j, 11]
+    p0 = lf[j, 0]
+    p1 = lf[j, 1]
+    p2 = lf[j, 2]
+    r = lf[j, 3]
+    dx = max(lo[0] - p0, 0.0, p0 - hi[0])
+    dy = max(lo[1] - p1, 0.0, p1 - hi[1])
+    dz = max(lo[2] - p2, 0.0, p2 - hi[2])
+    d2 = dx * dx + dy * dy + dz * dz
+    if not d2 <= r * r:
+        return False, 0.0
+    s = 1.0
+    if typ == SPOT:
+        v0 = c0 - p0
+        v1 = c1 - p1
+        v2 = c2 - p2
+        n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        a = v0 * lf[j, 4] + v1 * lf[j, 5] + v2 * lf[j, 6]
+        sq = math.sqrt(max(n * n - big_r * big_r, 0.0))
+        if not (n <= big_r or a >= lf[j, 7] * sq - big_r * lf[j, 8]):
+            return False, 0.0
+        if model == MODEL_CONTRIBUTION:
+            if n <= big_r or a >= sq:
+                c = 1.0
+            else:
+                c = (a * sq + big_r * math.sqrt(max(n * n - a * a, 0.0))) / (n * n)
+            if lf[j, 13] != 0.0:
+                s = 1.0 if c >= lf[j, 7] else 0.0
+            else:
+                t = (c - lf[j, 7]) / (lf[j, 9] - lf[j, 7])
+                t = min(max(t, 0.0), 1.0)
+                s = t * t
+    if model == MODEL_THESIS:
+        u0 = p0 - c0
+        u1 = p1 - c1
+        u2 = p2 - c2
+        d_object = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        return True, lf[j, 12] + w_obj * d_object + w_int * lf[j, 10] + lf[j, 11]
+    q = d2 / (r * r)
+    w = max(0.0, 1.0 - q * q)
+    g = 1.0 if e2 == 0.0 else min(1.0, 4.0 * r * r / e2)
+    return True, lf[j, 10] * w * w * g / (d2 + R0 * R0) * s + lf[j, 11]
+
+
+__all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "POINT", "SPOT", "pack_lights", "pair"]

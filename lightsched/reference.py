@@ -1,0 +1,459 @@
+"""The oracle: DESIGN section 2 in float64 Python floats and plain loops.
+
+Every light is tested against every object, every rule is written out where it is used, in
+the order DESIGN writes its formulas (no fused multiply-add, no vectorisation, no
+acceleration structure). numpy is used only to read the stores and to build the output
+arrays. The fast path (``lightsched.scheduler``) must agree with this module as DESIGN
+section 4 says.
+
+Decisions taken where DESIGN is silent (the fast path makes the same ones):
+
+- ``visible_lights`` lists every visible light (directional always), whatever the masks and
+  the unshadowed rule.
+- Shadows are not implemented yet: no shadow lights, no casters, ``slot_shadow`` all -1, so
+  with ``unshadowed="skip"`` every light with ``shadows=True`` affects nothing.
+  ``cascade_splits`` is computed.
+- Directional lights are ranked by P = i + p_user whatever the masks; with
+  ``directional_in_slots`` they compete for slots instead (masks apply).
+- Hysteresis looks at last frame's selected set, including selected lights that waited
+  without a slot; that set is empty for a new object or one invisible last frame.
+- An object that is new, was invisible last frame, on the first frame, or in a cut frame
+  gets exactly its selected lights, on at weight 1.
+- Thesis eccentricity uses the focal ray g = f + (focus_x t_x) r + (focus_y t_y) u and
+  theta = atan2(|g x v|, g . v); P is the max over all cameras.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from .frame import Frame, empty_frame
+from .scene import (
+    DIRECTIONAL,
+    FADING_IN,
+    FADING_OUT,
+    ON,
+    SPOT,
+    Camera,
+    Config,
+    SceneAPI,
+)
+
+R0 = 0.1  # metres: the falloff's softening distance r0
+EPS = 1e-6  # a weight within EPS of 1 is 1, a fading-out weight within EPS of 0 is 0
+
+Vec = tuple[float, float, float]
+
+
+# --------------------------------------------------------------------------- vectors
+
+
+def _cross(a: Vec, b: Vec) -> Vec:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a: Vec, b: Vec) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _length(v: Vec) -> float:
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+def _normalize(v: Vec) -> Vec:
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
+def _vec(a: Any) -> Vec:
+    return (float(a[0]), float(a[1]), float(a[2]))
+
+
+def _sqrt0(x: float) -> float:
+    """sqrt with a negative radicand counted as 0."""
+    return math.sqrt(x) if x > 0.0 else 0.0
+
+
+# --------------------------------------------------------------------------- cameras
+
+
+class CameraFrame:
+    """DESIGN section 2, "Camera frame": basis, tangents and the six inward planes."""
+
+    def __init__(self, cam: Camera) -> None:
+        self.position = p = _vec(cam.position)
+        self.f = f = _normalize(_vec(cam.forward))
+        self.r = r = _normalize(_cross(f, _vec(cam.up)))
+        self.u = u = _cross(r, f)
+        self.t_y = t_y = math.tan(float(cam.fov_y) / 2)
+        self.t_x = t_x = float(cam.aspect) * t_y
+        self.near = near = float(cam.near)
+        self.far = far = float(cam.far)
+        self.focus = (float(cam.focus[0]), float(cam.focus[1]))
+        self.height_px = float(cam.height_px)
+        sx = math.sqrt(1 + t_x * t_x)
+        sy = math.sqrt(1 + t_y * t_y)
+        near_point = (p[0] + near * f[0], p[1] + near * f[1], p[2] + near * f[2])
+        far_point = (p[0] + far * f[0], p[1] + far * f[1], p[2] + far * f[2])
+        # (inward unit normal, point on the plane)
+        self.planes: list[tuple[Vec, Vec]] = [
+            (f, near_point),
+            ((-f[0], -f[1], -f[2]), far_point),
+            (((r[0] + t_x * f[0]) / sx, (r[1] + t_x * f[1]) / sx, (r[2] + t_x * f[2]) / sx), p),
+            (((-r[0] + t_x * f[0]) / sx, (-r[1] + t_x * f[1]) / sx, (-r[2] + t_x * f[2]) / sx),
+             p),
+            (((u[0] + t_y * f[0]) / sy, (u[1] + t_y * f[1]) / sy, (u[2] + t_y * f[2]) / sy), p),
+            (((-u[0] + t_y * f[0]) / sy, (-u[1] + t_y * f[1]) / sy, (-u[2] + t_y * f[2]) / sy),
+             p),
+        ]
+        fx, fy = self.focus
+        ax = fx * t_x
+        ay = fy * t_y
+        # The focal ray through the focus point (thesis eccentricity).
+        self.g: Vec = (f[0] + ax * r[0] + ay * u[0],
+                       f[1] + ax * r[1] + ay * u[1],
+                       f[2] + ax * r[2] + ay * u[2])
+
+
+def signed_distance(n: Vec, point: Vec, x: Vec) -> float:
+    """n . (x - point), written left to right."""
+    return n[0] * (x[0] - point[0]) + n[1] * (x[1] - point[1]) + n[2] * (x[2] - point[2])
+
+
+def ball_in_planes(planes: list[tuple[Vec, Vec]], centre: Vec, radius: float) -> bool:
+    for n, point in planes:
+        if not signed_distance(n, point, centre) >= -radius:
+            return False
+    return True
+
+
+def aabb_in_planes(planes: list[tuple[Vec, Vec]], lo: Vec, hi: Vec) -> bool:
+    for n, point in planes:
+        corner = (hi[0] if n[0] >= 0 else lo[0],
+                  hi[1] if n[1] >= 0 else lo[1],
+                  hi[2] if n[2] >= 0 else lo[2])
+        if not signed_distance(n, point, corner) >= 0:
+            return False
+    return True
+
+
+def cascade_splits(cam: CameraFrame, config: Config) -> list[float]:
+    """z_0..z_C of DESIGN section 2 (Casters, directional)."""
+    near = cam.near
+    d = min(cam.far, config.shadow_distance)
+    c = config.cascades
+    return [0.5 * near * (d / near) ** (i / c) + 0.5 * (near + (d - near) * i / c)
+            for i in range(c + 1)]
+
+
+# --------------------------------------------------------------------------- pairs
+
+
+class _Light:
+    __slots__ = ("row", "id", "type", "position", "radius", "direction", "outer", "inner",
+                 "intensity", "p_user", "shadows", "mask")
+
+
+class _Object:
+    __slots__ = ("row", "id", "lo", "hi", "mask", "centre", "R", "e2")
+
+
+def _read_lights(store: Any) -> list[_Light]:
+    out = []
+    for row in range(len(store)):
+        lt = _Light()
+        lt.row = row
+        lt.id = int(store.id[row])
+        lt.type = int(store.type[row])
+        lt.position = _vec(store.position[row])
+        lt.radius = float(store.radius[row])
+        lt.direction = _vec(store.direction[row])
+        lt.outer = float(store.outer_angle[row])
+        lt.inner = float(store.inner_angle[row])
+        lt.intensity = float(store.intensity[row])
+        lt.p_user = float(store.priority[row])
+        lt.shadows = bool(store.shadows[row])
+        lt.mask = int(store.mask[row])
+        out.append(lt)
+    return out
+
+
+def _read_objects(store: Any) -> list[_Object]:
+    out = []
+    for row in range(len(store)):
+        ob = _Object()
+        ob.row = row
+        ob.id = int(store.id[row])
+        lo = ob.lo = _vec(store.bounds_min[row])
+        hi = ob.hi = _vec(store.bounds_max[row])
+        ob.mask = int(store.mask[row])
+        ob.centre = ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2)
+        ex, ey, ez = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+        ob.e2 = ex * ex + ey * ey + ez * ez
+        ob.R = math.sqrt(ex * ex + ey * ey + ez * ez) / 2
+        out.append(ob)
+    return out
+
+
+def box_distance2(lo: Vec, hi: Vec, p: Vec) -> float:
+    """d2: squared distance from p to the box [lo, hi]."""
+    dx = max(lo[0] - p[0], 0.0, p[0] - hi[0])
+    dy = max(lo[1] - p[1], 0.0, p[1] - hi[1])
+    dz = max(lo[2] - p[2], 0.0, p[2] - hi[2])
+    return dx * dx + dy * dy + dz * dz
+
+
+def _spot_geometry(lt: _Light, ob: _Object) -> tuple[float, float, float]:
+    """(n, a, sqrt(n^2 - R^2)) for the sphere of ``ob`` seen from spot ``lt``."""
+    c, p, axis = ob.centre, lt.position, lt.direction
+    v = (c[0] - p[0], c[1] - p[1], c[2] - p[2])
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    a = v[0] * axis[0] + v[1] * axis[1] + v[2] * axis[2]
+    root = _sqrt0(n * n - ob.R * ob.R)
+    return n, a, root
+
+
+def affects_geometry(lt: _Light, ob: _Object) -> float | None:
+    """The range and cone part of Affects for a point or spot light: d2, or None."""
+    r = lt.radius
+    d2 = box_distance2(ob.lo, ob.hi, lt.position)
+    if not d2 <= r * r:
+        return None
+    if lt.type == SPOT:
+        n, a, root = _spot_geometry(lt, ob)
+        R = ob.R
+        if not (n <= R or a >= math.cos(lt.outer) * root - R * math.sin(lt.outer)):
+            return None
+    return d2
+
+
+def spot_factor(lt: _Light, ob: _Object) -> float:
+    """s of the contribution model for a spot light."""
+    n, a, root = _spot_geometry(lt, ob)
+    R = ob.R
+    if n <= R or a >= root:
+        c = 1.0
+    else:
+        n2 = n * n
+        c = (a * root + R * _sqrt0(n2 - a * a)) / n2 if n2 > 0.0 else 1.0
+    cos_o = math.cos(lt.outer)
+    if lt.inner == lt.outer:
+        return 1.0 if c >= cos_o else 0.0
+    t = (c - cos_o) / (math.cos(lt.inner) - cos_o)
+    t = min(max(t, 0.0), 1.0)
+    return t * t
+
+
+def contribution_priority(lt: _Light, ob: _Object, d2: float) -> float:
+    r = lt.radius
+    q = d2 / (r * r)
+    w = max(0.0, 1 - q * q)
+    g = 1.0 if ob.e2 == 0 else min(1.0, 4 * r * r / ob.e2)
+    s = spot_factor(lt, ob) if lt.type == SPOT else 1.0
+    return lt.intensity * w * w * g / (d2 + R0 * R0) * s + lt.p_user
+
+
+def thesis_priority(lt: _Light, ob: _Object, cams: list[CameraFrame], cfg: Config) -> float:
+    p, c = lt.position, ob.centre
+    do = (p[0] - c[0], p[1] - c[1], p[2] - c[2])
+    d_object = math.sqrt(do[0] * do[0] + do[1] * do[1] + do[2] * do[2])
+    best = -math.inf
+    for cam in cams:
+        e = cam.position
+        v = (p[0] - e[0], p[1] - e[1], p[2] - e[2])
+        d_viewer = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        r = lt.radius
+        if d_viewer <= r:
+            f = 1.0
+        else:
+            alpha = math.asin(min(1.0, r / d_viewer))
+            theta = math.atan2(_length(_cross(cam.g, v)), _dot(cam.g, v))
+            f = 1.0 if theta <= alpha else math.exp(-(theta - alpha) / cfg.c1)
+        val = (cfg.w_ecc * f + cfg.w_dist * d_viewer + cfg.w_obj * d_object
+               + cfg.w_int * lt.intensity)
+        if val > best:
+            best = val
+    return best + lt.p_user
+
+
+def _by_priority(items: dict[int, float]) -> list[int]:
+    """Light ids by value descending, ties to the lower id."""
+    return sorted(items, key=lambda lid: (-items[lid], lid))
+
+
+# --------------------------------------------------------------------------- scheduler
+
+
+class _ObjectState:
+    __slots__ = ("slots", "selected", "visible")
+
+    def __init__(self) -> None:
+        self.slots: list[list[Any]] = []  # [light_id, weight, state]
+        self.selected: set[int] = set()
+        self.visible = False
+
+
+class Scheduler(SceneAPI):
+    """Steps frames the slow, obvious way (DESIGN section 7, the oracle)."""
+
+    def __init__(self, config: Config | None = None) -> None:
+        super().__init__(config)
+        self._state: dict[int, _ObjectState] = {}
+
+    def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
+        t0 = time.perf_counter()
+        cfg = self.config
+        k_max = cfg.max_lights
+        cams = [CameraFrame(c) for c in cameras]
+        lights = _read_lights(self.lights)
+        objects = _read_objects(self.objects)
+        is_new = [bool(x) for x in self.objects.is_new]
+        first = self.frame_index == 0
+
+        # Fade state follows ids; ids gone from the store lose it.
+        live = {ob.id for ob in objects}
+        self._state = {oid: st for oid, st in self._state.items() if oid in live}
+
+        # Visibility.
+        light_visible = []
+        for lt in lights:
+            if lt.type == DIRECTIONAL:
+                light_visible.append(True)
+            else:
+                light_visible.append(any(ball_in_planes(cam.planes, lt.position, lt.radius)
+                                         for cam in cams))
+        object_visible = [any(aabb_in_planes(cam.planes, ob.lo, ob.hi) for cam in cams)
+                          for ob in objects]
+
+        # No shadow lights yet: with "skip", every shadowed light affects nothing.
+        skipped = [cfg.unshadowed == "skip" and lt.shadows for lt in lights]
+
+        directional = {}
+        if not cfg.directional_in_slots:
+            for lt in lights:
+                if lt.type == DIRECTIONAL and not skipped[lt.row]:
+                    directional[lt.id] = lt.intensity + lt.p_user
+        directional_ids = _by_priority(directional)
+
+        frame = empty_frame(self.objects.id, k_max, len(cams), cfg.cascades)
+        row_of = {lt.id: lt.row for lt in lights}
+        pairs = 0
+        for ob in objects:
+            st = self._state.get(ob.id)
+            new = is_new[ob.row] or st is None
+            if new:
+                st = self._state[ob.id] = _ObjectState()
+            prev_visible = st.visible and not new
+            prev_selected = st.selected if prev_visible else set()
+            if not object_visible[ob.row]:
+                st.slots = []
+                st.selected = set()
+                st.visible = False
+                continue
+            frame.visible[ob.row] = True
+
+            # Affects and P of every slot-competing light.
+            prio: dict[int, float] = {}
+            for lt in lights:
+                if not light_visible[lt.row] or skipped[lt.row] or not lt.mask & ob.mask:
+                    continue
+                if lt.type == DIRECTIONAL:
+                    if cfg.directional_in_slots:
+                        prio[lt.id] = lt.intensity + lt.p_user
+                    continue
+                d2 = affects_geometry(lt, ob)
+                if d2 is None:
+                    continue
+                if cfg.model == "contribution":
+                    prio[lt.id] = contribution_priority(lt, ob, d2)
+                else:
+                    prio[lt.id] = thesis_priority(lt, ob, cams, cfg)
+            frame.candidates[ob.row] = len(prio)
+            pairs += len(prio)
+
+            # Selection with hysteresis.
+            key = {}
+            for lid, p in prio.items():
+                if lid in prev_selected:
+                    key[lid] = p + cfg.hysteresis * abs(p) + cfg.hysteresis_abs
+                else:
+                    key[lid] = p
+            selected = _by_priority(key)[:k_max]
+            selected_set = set(selected)
+
+            # Fade.
+            if new or not prev_visible or first or cut:
+                slots = [[lid, 1.0, ON] for lid in selected]
+            else:
+                slots = []
+                for lid, weight, state in st.slots:
+                    if lid not in prio:
+                        continue  # no longer affects: freed at once
+                    if lid in selected_set:
+                        if state != ON:
+                            state = FADING_IN
+                            weight = 1.0 if cfg.fade_in == 0 else weight + dt / cfg.fade_in
+                            if weight >= 1 - EPS:
+                                weight, state = 1.0, ON
+                        slots.append([lid, weight, state])
+                    else:
+                        if cfg.fade_out == 0:
+                            continue
+                        weight = weight - dt / cfg.fade_out
+                        if weight <= EPS:
+                            continue
+                        slots.append([lid, weight, FADING_OUT])
+                held = {s[0] for s in slots}
+                waiting = _by_priority({lid: prio[lid] for lid in selected if lid not in held})
+                for lid in waiting[:k_max - len(slots)]:
+                    weight = 1.0 if cfg.fade_in == 0 else min(1.0, dt / cfg.fade_in)
+                    state = FADING_IN
+                    if weight >= 1 - EPS:
+                        weight, state = 1.0, ON
+                    slots.append([lid, weight, state])
+            st.slots = slots
+            st.selected = selected_set
+            st.visible = True
+
+            # Output order.
+            lit = [s for s in slots if s[2] != FADING_OUT]
+            out = [s for s in slots if s[2] == FADING_OUT]
+            lit.sort(key=lambda s: (-prio[s[0]], s[0]))
+            out.sort(key=lambda s: (-s[1], s[0]))
+            ordered = lit + out
+            frame.count[ob.row] = len(ordered)
+            for j, (lid, weight, state) in enumerate(ordered):
+                frame.light_ids[ob.row, j] = lid
+                frame.light_index[ob.row, j] = row_of[lid]
+                frame.priority[ob.row, j] = np.float32(prio[lid])
+                frame.fade_weight[ob.row, j] = np.float32(weight)
+                frame.fade_state[ob.row, j] = state
+
+        frame.directional_lights = np.array(directional_ids, dtype=np.int32)
+        frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
+                                        dtype=np.int32)
+        frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],
+                                        dtype=np.float64).reshape(len(cams), cfg.cascades + 1)
+        frame.stats = {
+            "plan": {"all": "reference"},
+            "counts": {
+                "visible_objects": int(sum(object_visible)),
+                "visible_lights": int(sum(light_visible)),
+                "pairs": pairs,
+            },
+            "seconds": {"total": time.perf_counter() - t0},
+        }
+        return frame
+
+
+def schedule(lights: dict[str, Any], objects: dict[str, Any], cameras: Any,
+             config: Config | None = None) -> Frame:
+    """Stateless one frame: every object starts with its selected lights on."""
+    s = Scheduler(config)
+    s.set_lights(**lights)
+    s.set_objects(**objects)
+    return s.frame(cameras, dt=0.0, cut=True)
