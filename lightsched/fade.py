@@ -5,7 +5,7 @@ this frame's P and light row of each slot's light (row -1: it no longer affects 
 and this frame's selected set; writes the new slots in output order and returns how many are
 occupied. Eriksson (2006, 3.2) dropped fading because his three-list state cost too much;
 here a slot is a fixed row of K entries, so the machine streams with the object pass of
-pairs.py, where this function is inlined.
+pairs.py, where this function is inlined. Scratch layout: select.py (F_*, I_* rows).
 """
 
 from __future__ import annotations
@@ -13,7 +13,24 @@ from __future__ import annotations
 import numba as nb
 
 from .scene import FADING_IN, FADING_OUT, ON
-from .select import ranks_before
+from .select import (
+    F_NEW_P,
+    F_NEW_W,
+    F_OLD_P,
+    F_OLD_W,
+    F_P,
+    I_HAS_SLOT,
+    I_ID,
+    I_NEW_ID,
+    I_NEW_ROW,
+    I_NEW_ST,
+    I_OLD_ID,
+    I_OLD_ROW,
+    I_OLD_ST,
+    I_ROW,
+    I_TAKEN,
+    ranks_before,
+)
 
 ONE_EPS = 1e-6  # DESIGN: within 1e-6 of 1 is 1, a fading-out weight within 1e-6 of 0 is 0
 
@@ -31,46 +48,47 @@ def _slot_before(st_a, p_a, w_a, id_a, st_b, p_b, w_b, id_b):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def fade_object(sel, nsel, old, old_p, old_row, reset, rates, new, scratch):
-    """sel = (ids, P, rows) of the selected set; old = (ids, weights, states) of last frame's
-    slots; new = (ids, weights, states, P, rows) written in output order; rates =
-    (dt/fade_in, dt/fade_out, fade_in, fade_out); scratch = (has_slot, taken) bool[K]."""
-    sel_id, sel_p, sel_row = sel
-    old_id, old_w, old_st = old
-    new_id, new_w, new_st, new_p, new_row = new
-    has_slot, taken = scratch
-    inc, dec, fade_in, fade_out = rates
-    k = new_id.shape[0]
+def _put(sf, si, cnt, lid, w, st, p, row):
+    si[I_NEW_ID, cnt] = lid
+    sf[F_NEW_W, cnt] = w
+    si[I_NEW_ST, cnt] = st
+    sf[F_NEW_P, cnt] = p
+    si[I_NEW_ROW, cnt] = row
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
+    """Selected set in rows (I_ID, F_P, I_ROW)[:nsel]; last frame's slots in (I_OLD_ID,
+    F_OLD_W, I_OLD_ST) with this frame's (F_OLD_P, I_OLD_ROW); writes the new slots to
+    (I_NEW_ID, F_NEW_W, I_NEW_ST, F_NEW_P, I_NEW_ROW) in output order. inc = dt/fade_in,
+    dec = dt/fade_out."""
+    k = sf.shape[1]
     cnt = 0
     if reset:
         # Step 3: new, just visible, first frame or a cut: only visible changes fade.
         for t in range(nsel):
-            new_id[cnt] = sel_id[t]
-            new_w[cnt] = 1.0
-            new_st[cnt] = ON
-            new_p[cnt] = sel_p[t]
-            new_row[cnt] = sel_row[t]
+            _put(sf, si, cnt, si[I_ID, t], 1.0, ON, sf[F_P, t], si[I_ROW, t])
             cnt += 1
     else:
         for t in range(nsel):
-            has_slot[t] = False
-            taken[t] = False
+            si[I_HAS_SLOT, t] = 0
+            si[I_TAKEN, t] = 0
         # Step 1: occupied slots.
         for m in range(k):
-            lid = old_id[m]
+            lid = si[I_OLD_ID, m]
             if lid < 0:
                 break
-            if old_row[m] < 0:
+            if si[I_OLD_ROW, m] < 0:
                 continue  # no longer affects: freed at once, it shows nothing anyway
             chosen = -1
             for t in range(nsel):
-                if sel_id[t] == lid:
+                if si[I_ID, t] == lid:
                     chosen = t
                     break
-            w = old_w[m]
-            st = old_st[m]
+            w = sf[F_OLD_W, m]
+            st = si[I_OLD_ST, m]
             if chosen >= 0:
-                has_slot[chosen] = True
+                si[I_HAS_SLOT, chosen] = 1
                 if st != ON:
                     st = FADING_IN
                     w = 1.0 if fade_in == 0.0 else w + inc
@@ -84,53 +102,39 @@ def fade_object(sel, nsel, old, old_p, old_row, reset, rates, new, scratch):
                 if w <= ONE_EPS:
                     continue
                 st = FADING_OUT
-            new_id[cnt] = lid
-            new_w[cnt] = w
-            new_st[cnt] = st
-            new_p[cnt] = old_p[m]
-            new_row[cnt] = old_row[m]
+            _put(sf, si, cnt, lid, w, st, sf[F_OLD_P, m], si[I_OLD_ROW, m])
             cnt += 1
         # Step 2: slotless selected lights take free slots, highest P first.
         while cnt < k:
             best = -1
             for t in range(nsel):
-                if has_slot[t] or taken[t]:
+                if si[I_HAS_SLOT, t] != 0 or si[I_TAKEN, t] != 0:
                     continue
-                if best < 0 or ranks_before(sel_p[t], sel_id[t], sel_p[best], sel_id[best]):
+                if best < 0 or ranks_before(sf[F_P, t], si[I_ID, t], sf[F_P, best],
+                                            si[I_ID, best]):
                     best = t
             if best < 0:
                 break
-            taken[best] = True
+            si[I_TAKEN, best] = 1
             w = 1.0 if fade_in == 0.0 else min(1.0, inc)
             st = FADING_IN
             if w >= 1.0 - ONE_EPS:
                 w = 1.0
                 st = ON
-            new_id[cnt] = sel_id[best]
-            new_w[cnt] = w
-            new_st[cnt] = st
-            new_p[cnt] = sel_p[best]
-            new_row[cnt] = sel_row[best]
+            _put(sf, si, cnt, si[I_ID, best], w, st, sf[F_P, best], si[I_ROW, best])
             cnt += 1
     # Insertion sort into output order (at most K entries).
     for i in range(1, cnt):
-        lid = new_id[i]
-        w = new_w[i]
-        st = new_st[i]
-        p = new_p[i]
-        row = new_row[i]
+        lid = si[I_NEW_ID, i]
+        w = sf[F_NEW_W, i]
+        st = si[I_NEW_ST, i]
+        p = sf[F_NEW_P, i]
+        row = si[I_NEW_ROW, i]
         j = i
-        while j > 0 and _slot_before(st, p, w, lid, new_st[j - 1], new_p[j - 1],
-                                     new_w[j - 1], new_id[j - 1]):
-            new_id[j] = new_id[j - 1]
-            new_w[j] = new_w[j - 1]
-            new_st[j] = new_st[j - 1]
-            new_p[j] = new_p[j - 1]
-            new_row[j] = new_row[j - 1]
+        while j > 0 and _slot_before(st, p, w, lid, si[I_NEW_ST, j - 1], sf[F_NEW_P, j - 1],
+                                     sf[F_NEW_W, j - 1], si[I_NEW_ID, j - 1]):
+            _put(sf, si, j, si[I_NEW_ID, j - 1], sf[F_NEW_W, j - 1], si[I_NEW_ST, j - 1],
+                 sf[F_NEW_P, j - 1], si[I_NEW_ROW, j - 1])
             j -= 1
-        new_id[j] = lid
-        new_w[j] = w
-        new_st[j] = st
-        new_p[j] = p
-        new_row[j] = row
+        _put(sf, si, j, lid, w, st, p, row)
     return cnt

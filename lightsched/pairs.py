@@ -24,7 +24,23 @@ import numpy as np
 
 from .fade import fade_object
 from .priority import pair
-from .select import hysteresis_key, topk_insert
+from .select import (
+    F_NEW_P,
+    F_NEW_W,
+    F_OLD_P,
+    F_OLD_W,
+    F_ROWS,
+    I_ID,
+    I_NEW_ID,
+    I_NEW_ROW,
+    I_NEW_ST,
+    I_OLD_ID,
+    I_OLD_ROW,
+    I_OLD_ST,
+    I_PREV_SEL,
+    I_ROWS,
+    topk_insert,
+)
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 MAX_CELLS_PER_LIGHT = 512    # a light covering more is tested against every object
@@ -42,10 +58,14 @@ def _cell(x, origin, inv_h, dim):
 
 
 @nb.njit(cache=True, nogil=True)
-def build_grid(lf, rows, origin, inv_h, dims):
-    """Cell lists (CSR) of the lights in ``rows``; returns (cell_start, cell_lights,
-    light_cells [L, 6] (first and last cell per axis, by light row), big_rows)."""
-    n_l = lf.shape[0]
+def build_grid(hot, rows, origin, inv_h, dims):
+    """Cell lists (CSR) of the lights in ``rows``; returns (cell_start, cell_data, big_rows).
+
+    Each entry of cell_data [M, 8] is a copy of the light's 64-byte record (priority.py)
+    whose code carries 3 more bits, bit a set when this cell is the light's first along
+    axis a; scanning a cell is then a linear walk, and a point light's pair is computed
+    without touching any other light array."""
+    n_l = hot.shape[0]
     light_cells = np.zeros((n_l, 6), np.int32)
     ncell = dims[0] * dims[1] * dims[2]
     counts = np.zeros(ncell + 1, np.int64)
@@ -53,10 +73,10 @@ def build_grid(lf, rows, origin, inv_h, dims):
     n_big = 0
     for t in range(rows.shape[0]):
         j = rows[t]
-        r = lf[j, 3]
+        r = hot[j, 3]
         covered = 1
         for a in range(3):
-            p = lf[j, a]
+            p = hot[j, a]
             slack = r * 1e-9 + abs(p) * 1e-15
             c0 = _cell(p - r - slack, origin[a], inv_h, dims[a])
             c1 = _cell(p + r + slack, origin[a], inv_h, dims[a])
@@ -73,7 +93,7 @@ def build_grid(lf, rows, origin, inv_h, dims):
                     counts[(x * dims[1] + y) * dims[2] + z + 1] += 1
     for c in range(ncell):
         counts[c + 1] += counts[c]
-    cell_lights = np.empty(counts[ncell], np.int32)
+    cell_data = np.empty((counts[ncell], 8))
     fill = counts[:ncell].copy()
     big_rows = np.empty(n_big, np.int32)
     b = 0
@@ -87,9 +107,14 @@ def build_grid(lf, rows, origin, inv_h, dims):
             for y in range(light_cells[j, 1], light_cells[j, 4] + 1):
                 for z in range(light_cells[j, 2], light_cells[j, 5] + 1):
                     c = (x * dims[1] + y) * dims[2] + z
-                    cell_lights[fill[c]] = j
+                    e = fill[c]
                     fill[c] += 1
-    return counts, cell_lights, light_cells, big_rows
+                    for a in range(8):
+                        cell_data[e, a] = hot[j, a]
+                    first = ((x == light_cells[j, 0]) * 1 + (y == light_cells[j, 1]) * 2
+                             + (z == light_cells[j, 2]) * 4)
+                    cell_data[e, 5] += first
+    return counts, cell_data, big_rows
 
 
 def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, float, np.ndarray]:
@@ -105,135 +130,155 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _push(buf, n, j):
-    if n == buf.shape[0]:
-        grown = np.empty(2 * n, np.int32)
-        grown[:n] = buf
-        buf = grown
-    buf[n] = j
-    return buf, n + 1
+def _consider(rec, e, lf, box, geo, sf, si, nbest, cand, cfg):
+    """One light record against the current object: Affects, P, hysteresis key, top-K
+    insert, and this frame's P / row for the object's old slot of that light. geo = (c0,
+    c1, c2, big_r, e2); cfg = (model, w_obj, w_int, h, h_abs). Returns (nbest, cand)."""
+    hit, p = pair(rec, e, lf, box, geo[0], geo[1], geo[2], geo[3], geo[4], cfg[0], cfg[1],
+                  cfg[2])
+    if not hit:
+        return nbest, cand
+    j = np.int64(rec[e, 5]) >> 5
+    lid = np.int64(lf[j, 6])
+    key = p
+    for m in range(sf.shape[1]):
+        if si[I_PREV_SEL, m] == lid:
+            key = p + cfg[3] * abs(p) + cfg[4]
+        if si[I_OLD_ID, m] == lid:
+            sf[F_OLD_P, m] = p
+            si[I_OLD_ROW, m] = j
+    return topk_insert(sf, si, nbest, key, lid, p, j), cand + 1
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _scan_grid(om, lf, box, geo, sf, si, nbest, cand, cfg, grid):
+    """Walks the grid cells the box overlaps; a pair is taken only in the first cell light
+    and object share: along each axis that cell is the object's first or the light's first
+    (the entry's bits). Returns (nbest, cand)."""
+    g_f, dims, cell_start, cell_data = grid
+    x0 = _cell(box[0], g_f[0], g_f[3], dims[0])
+    y0 = _cell(box[1], g_f[1], g_f[3], dims[1])
+    z0 = _cell(box[2], g_f[2], g_f[3], dims[2])
+    x1 = _cell(box[3], g_f[0], g_f[3], dims[0])
+    y1 = _cell(box[4], g_f[1], g_f[3], dims[1])
+    z1 = _cell(box[5], g_f[2], g_f[3], dims[2])
+    for x in range(x0, x1 + 1):
+        need = 0 if x == x0 else 1
+        for y in range(y0, y1 + 1):
+            need_y = need | (0 if y == y0 else 2)
+            base = (x * dims[1] + y) * dims[2]
+            for z in range(z0, z1 + 1):
+                need_z = need_y | (0 if z == z0 else 4)
+                for e in range(cell_start[base + z], cell_start[base + z + 1]):
+                    if np.int64(cell_data[e, 5]) & need_z != need_z:
+                        continue
+                    if np.int64(cell_data[e, 4]) & om == 0:
+                        continue
+                    nbest, cand = _consider(cell_data, e, lf, box, geo, sf, si, nbest, cand,
+                                            cfg)
+    return nbest, cand
 
 
 @nb.njit(cache=True, nogil=True)
-def _gather(lo, hi, grid, buf):
-    """Rows of the grid lights whose cells meet the box, each once; returns (buf, n)."""
-    g_f, dims, cell_start, cell_lights, light_cells = grid
-    n = 0
-    x0 = _cell(lo[0], g_f[0], g_f[3], dims[0])
-    y0 = _cell(lo[1], g_f[1], g_f[3], dims[1])
-    z0 = _cell(lo[2], g_f[2], g_f[3], dims[2])
-    x1 = _cell(hi[0], g_f[0], g_f[3], dims[0])
-    y1 = _cell(hi[1], g_f[1], g_f[3], dims[1])
-    z1 = _cell(hi[2], g_f[2], g_f[3], dims[2])
-    for x in range(x0, x1 + 1):
-        for y in range(y0, y1 + 1):
-            base = (x * dims[1] + y) * dims[2]
-            for z in range(z0, z1 + 1):
-                c = base + z
-                for e in range(cell_start[c], cell_start[c + 1]):
-                    j = cell_lights[e]
-                    # Take the pair only in the first cell shared by light and object.
-                    if (x == max(light_cells[j, 0], x0) and y == max(light_cells[j, 1], y0)
-                            and z == max(light_cells[j, 2], z0)):
-                        buf, n = _push(buf, n, j)
-    return buf, n
+def cell_order(lo, hi, visible, g_f, dims):
+    """Objects in grid-cell order of their centres (a counting sort): neighbours then share
+    lights in cache. Invisible objects go last. Returns int64[N]."""
+    n = lo.shape[0]
+    ncell = dims[0] * dims[1] * dims[2]
+    key = np.empty(n, np.int64)
+    counts = np.zeros(ncell + 2, np.int64)
+    for o in range(n):
+        if visible[o]:
+            x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
+            y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[3], dims[1])
+            z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[3], dims[2])
+            key[o] = (x * dims[1] + y) * dims[2] + z
+        else:
+            key[o] = ncell
+        counts[key[o] + 1] += 1
+    for c in range(ncell + 1):
+        counts[c + 1] += counts[c]
+    order = np.empty(n, np.int64)
+    for o in range(n):
+        order[counts[key[o]]] = o
+        counts[key[o]] += 1
+    return order
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def object_pass(objs, lights, grid, glob, state_in, state_out, out, params):
     """For every object: affecting lights, P, top-K with hysteresis, fade, output rows.
 
-    objs = (bounds_min, bounds_max, mask, visible, reset); lights = (light_f, light_i);
-    grid = (origin + 1/h [4], dims, cell_start, cell_lights, light_cells) with dims all 0 for
-    no grid; glob = rows every object tests; state_in/state_out = (slot ids, slot weights
-    f64, slot states, selected ids) [N, K]; out = (light_ids, light_index, priority f32,
-    fade_weight f32, fade_state, count, candidates); params = (model, w_obj, w_int, h, h_abs, dt/fade_in,
-    dt/fade_out, fade_in, fade_out).
+    objs = (bounds_min, bounds_max, mask, visible, reset, order), objects walked in
+    ``order``; lights = (light_hot, light_f) (priority.py); grid = (origin and 1/h [4],
+    dims, cell_start, cell_data), dims all 0 for no grid; glob = light rows every object
+    tests; state_in / state_out = (slot ids, slot weights f64, slot states, selected ids),
+    each [N, K]; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
+    count, candidates); params = (model, w_obj, w_int, h, h_abs, dt/fade_in, dt/fade_out,
+    fade_in, fade_out).
     """
-    lo_all, hi_all, omask, visible, reset = objs
-    lf, li = lights
+    lo_all, hi_all, omask, visible, reset, order = objs
+    hot, lf = lights
     s_id, s_w, s_st, s_sel = state_in
     n_id, n_w, n_st, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
-    model = int(params[0])
-    w_obj = params[1]
-    w_int = params[2]
-    h = params[3]
-    h_abs = params[4]
-    rates = (params[5], params[6], params[7], params[8])
+    cfg = (int(params[0]), params[1], params[2], params[3], params[4])
+    inc = params[5]
+    dec = params[6]
+    fade_in = params[7]
+    fade_out = params[8]
     use_grid = grid[1][0] > 0
     n_obj = lo_all.shape[0]
     k = s_id.shape[1]
     n_chunks = (n_obj + CHUNK - 1) // CHUNK
     for ch in nb.prange(n_chunks):
-        best_key = np.empty(k)
-        best_id = np.empty(k, np.int64)
-        best_p = np.empty(k)
-        best_row = np.empty(k, np.int64)
-        old_p = np.empty(k)
-        old_row = np.empty(k, np.int64)
-        new_id = np.empty(k, np.int64)
-        new_w = np.empty(k)
-        new_st = np.empty(k, np.uint8)
-        new_p = np.empty(k)
-        new_row = np.empty(k, np.int64)
-        has_slot = np.empty(k, np.bool_)
-        taken = np.empty(k, np.bool_)
-        buf = np.empty(64, np.int32)
-        for o in range(ch * CHUNK, min(n_obj, (ch + 1) * CHUNK)):
+        sf = np.empty((F_ROWS, k))
+        si = np.empty((I_ROWS, k), np.int64)
+        box = np.empty(6)
+        for t_o in range(ch * CHUNK, min(n_obj, (ch + 1) * CHUNK)):
+            o = order[t_o]
             cnt = 0
             nbest = 0
             cand = 0
             if visible[o]:
-                lo = lo_all[o]
-                hi = hi_all[o]
-                c0 = (lo[0] + hi[0]) / 2
-                c1 = (lo[1] + hi[1]) / 2
-                c2 = (lo[2] + hi[2]) / 2
-                e0 = hi[0] - lo[0]
-                e1 = hi[1] - lo[1]
-                e2_ = hi[2] - lo[2]
-                e2 = e0 * e0 + e1 * e1 + e2_ * e2_
+                for a in range(3):
+                    box[a] = lo_all[o, a]
+                    box[3 + a] = hi_all[o, a]
+                c0 = (box[0] + box[3]) / 2
+                c1 = (box[1] + box[4]) / 2
+                c2 = (box[2] + box[5]) / 2
+                ex = box[3] - box[0]
+                ey = box[4] - box[1]
+                ez = box[5] - box[2]
+                e2 = ex * ex + ey * ey + ez * ez
                 big_r = math.sqrt(e2) / 2
                 om = np.int64(omask[o])
-                old_id = s_id[o]
                 for m in range(k):
-                    old_row[m] = -1
-                n = 0
+                    si[I_OLD_ID, m] = s_id[o, m]
+                    sf[F_OLD_W, m] = s_w[o, m]
+                    si[I_OLD_ST, m] = s_st[o, m]
+                    si[I_PREV_SEL, m] = s_sel[o, m]
+                    si[I_OLD_ROW, m] = -1
+                geo = (c0, c1, c2, big_r, e2)
                 if use_grid:
-                    buf, n = _gather(lo, hi, grid, buf)
-                for t in range(n + glob.shape[0]):
-                    j = buf[t] if t < n else glob[t - n]
-                    if li[j, 0] & om == 0:
-                        continue
-                    hit, p = pair(lf, j, lo, hi, c0, c1, c2, big_r, e2, model, w_obj, w_int)
-                    if not hit:
-                        continue
-                    cand += 1
-                    lid = li[j, 1]
-                    for m in range(k):
-                        if old_id[m] < 0:
-                            break
-                        if old_id[m] == lid:
-                            old_p[m] = p
-                            old_row[m] = j
-                    key = hysteresis_key(p, lid, s_sel[o], h, h_abs)
-                    nbest = topk_insert(best_key, best_id, best_p, best_row, nbest, key, lid,
-                                        p, j)
-                cnt = fade_object((best_id, best_p, best_row), nbest,
-                                  (s_id[o], s_w[o], s_st[o]), old_p, old_row, reset[o],
-                                  rates, (new_id, new_w, new_st, new_p, new_row),
-                                  (has_slot, taken))
+                    nbest, cand = _scan_grid(om, lf, box, geo, sf, si, nbest, cand, cfg,
+                                             grid)
+                for t in range(glob.shape[0]):
+                    j = glob[t]
+                    if np.int64(hot[j, 4]) & om != 0:
+                        nbest, cand = _consider(hot, j, lf, box, geo, sf, si, nbest, cand,
+                                                cfg)
+                cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):
                 if m < cnt:
-                    n_id[o, m] = new_id[m]
-                    n_w[o, m] = new_w[m]
-                    n_st[o, m] = new_st[m]
-                    o_ids[o, m] = new_id[m]
-                    o_index[o, m] = new_row[m]
-                    o_prio[o, m] = np.float32(new_p[m])
-                    o_w[o, m] = np.float32(new_w[m])
-                    o_st[o, m] = new_st[m]
+                    n_id[o, m] = si[I_NEW_ID, m]
+                    n_w[o, m] = sf[F_NEW_W, m]
+                    n_st[o, m] = si[I_NEW_ST, m]
+                    o_ids[o, m] = si[I_NEW_ID, m]
+                    o_index[o, m] = si[I_NEW_ROW, m]
+                    o_prio[o, m] = np.float32(sf[F_NEW_P, m])
+                    o_w[o, m] = np.float32(sf[F_NEW_W, m])
+                    o_st[o, m] = si[I_NEW_ST, m]
                 else:
                     n_id[o, m] = -1
                     n_w[o, m] = 0.0
@@ -243,6 +288,6 @@ def object_pass(objs, lights, grid, glob, state_in, state_out, out, params):
                     o_prio[o, m] = 0.0
                     o_w[o, m] = 0.0
                     o_st[o, m] = 0
-                n_sel[o, m] = best_id[m] if m < nbest else -1
+                n_sel[o, m] = si[I_ID, m] if m < nbest else -1
             o_count[o] = cnt
             o_cand[o] = cand

@@ -4,11 +4,13 @@ Takes a packed light row (see ``pack_lights``) and an object's box; returns whet
 affects the object and the pair's priority P. The per-pair functions are inlined into the
 fused object pass of pairs.py; this module owns their definitions.
 
-Packed light columns (float64 ``light_f[L, 16]``):
-  0-2 position, 3 radius, 4-6 axis (normalised direction), 7 cos(outer), 8 sin(outer),
-  9 cos(inner), 10 intensity i, 11 user priority p_user, 12 thesis camera term A,
-  13 inner == outer (1.0 / 0.0), 14 type.
-Integer columns (int64 ``light_i[L, 2]``): 0 mask, 1 id.
+Packed lights, two float64 row arrays, so that a point light's whole pair computation
+reads one 64-byte record: ``light_hot[L, 8]`` (the record, also copied into the grid's
+cells by pairs.py): 0-2 position, 3 radius, 4 mask, 5 code = row * 32 + type * 8 (the
+low 3 bits are the grid's first-cell bits), 6 intensity i, 7 user priority p_user (all
+exact in float64); ``light_f[L, 8]``: 0-2 axis (normalised direction), 3 cos(outer),
+4 sin(outer), 5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer
+get cos(inner) = NaN, which selects the step profile.
 """
 
 from __future__ import annotations
@@ -29,22 +31,21 @@ MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
 def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
           cam_pos, cam_basis, cam_tan, cam_focus, thesis_w):
     n = typ.shape[0]
-    lf = np.zeros((n, 16))
-    li = np.zeros((n, 2), np.int64)
+    hot = np.zeros((n, 8))
+    lf = np.zeros((n, 8))
     for j in range(n):
         for k in range(3):
-            lf[j, k] = position[j, k]
-            lf[j, 4 + k] = direction[j, k]
-        lf[j, 3] = radius[j]
-        lf[j, 7] = math.cos(outer[j])
-        lf[j, 8] = math.sin(outer[j])
-        lf[j, 9] = math.cos(inner[j])
-        lf[j, 10] = intensity[j]
-        lf[j, 11] = prio[j]
-        lf[j, 13] = 1.0 if inner[j] == outer[j] else 0.0
-        lf[j, 14] = typ[j]
-        li[j, 0] = mask[j]
-        li[j, 1] = ids[j]
+            hot[j, k] = position[j, k]
+            lf[j, k] = direction[j, k]
+        hot[j, 3] = radius[j]
+        hot[j, 4] = mask[j]
+        hot[j, 5] = j * 32 + typ[j] * 8
+        hot[j, 6] = intensity[j]
+        hot[j, 7] = prio[j]
+        lf[j, 3] = math.cos(outer[j])
+        lf[j, 4] = math.sin(outer[j])
+        lf[j, 5] = math.cos(inner[j]) if inner[j] != outer[j] else np.nan
+        lf[j, 6] = ids[j]
         if typ[j] != DIRECTIONAL:
             best = -np.inf
             for c in range(cam_pos.shape[0]):
@@ -53,8 +54,8 @@ def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask,
                                        thesis_w[2])
                 if a > best:
                     best = a
-            lf[j, 12] = best
-    return lf, li
+            lf[j, 7] = best
+    return hot, lf
 
 
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
@@ -96,41 +97,49 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def pair(lf, j, lo, hi, c0, c1, c2, big_r, e2, model, w_obj, w_int):
-    """(affects, P) of light row j and the box [lo, hi] with centre c, radius big_r and
-    squared diagonal e2. Masks and visibility are checked by the caller."""
-    typ = lf[j, 14]
+def pair(rec, e, lf, box, c0, c1, c2, big_r, e2, model, w_obj, w_int):
+    """(affects, P) of the light whose record is rec[e] (layout above) and the box
+    [box[0:3], box[3:6]] with centre c, radius big_r and squared diagonal e2.
+
+    DESIGN section 2: point, d2 <= r*r; spot, that and the one-nappe cone test; directional,
+    always (masks and visibility are checked by the caller). P by the configured model:
+    "contribution" (windowed falloff, size and spot factors) or "thesis" (Eriksson eq. 3.1,
+    camera term precomputed per light); directional lights have P = i + p_user.
+    """
+    code = np.int64(rec[e, 5])
+    typ = (code >> 3) & 3
     if typ == DIRECTIONAL:
-        return True, lf[j, 10] + lf[j, 11]
-    p0 = lf[j, 0]
-    p1 = lf[j, 1]
-    p2 = lf[j, 2]
-    r = lf[j, 3]
-    dx = max(lo[0] - p0, 0.0, p0 - hi[0])
-    dy = max(lo[1] - p1, 0.0, p1 - hi[1])
-    dz = max(lo[2] - p2, 0.0, p2 - hi[2])
+        return True, rec[e, 6] + rec[e, 7]
+    p0 = rec[e, 0]
+    p1 = rec[e, 1]
+    p2 = rec[e, 2]
+    r = rec[e, 3]
+    dx = max(box[0] - p0, 0.0, p0 - box[3])
+    dy = max(box[1] - p1, 0.0, p1 - box[4])
+    dz = max(box[2] - p2, 0.0, p2 - box[5])
     d2 = dx * dx + dy * dy + dz * dz
     if not d2 <= r * r:
         return False, 0.0
+    j = code >> 5
     s = 1.0
     if typ == SPOT:
         v0 = c0 - p0
         v1 = c1 - p1
         v2 = c2 - p2
         n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        a = v0 * lf[j, 4] + v1 * lf[j, 5] + v2 * lf[j, 6]
+        a = v0 * lf[j, 0] + v1 * lf[j, 1] + v2 * lf[j, 2]
         sq = math.sqrt(max(n * n - big_r * big_r, 0.0))
-        if not (n <= big_r or a >= lf[j, 7] * sq - big_r * lf[j, 8]):
+        if not (n <= big_r or a >= lf[j, 3] * sq - big_r * lf[j, 4]):
             return False, 0.0
         if model == MODEL_CONTRIBUTION:
-            if n <= big_r or a >= sq:
-                c = 1.0
+            if n <= big_r or a >= sq or n * n == 0.0:
+                c = 1.0  # (n*n == 0 only when n*n underflows: the light is on the centre)
             else:
                 c = (a * sq + big_r * math.sqrt(max(n * n - a * a, 0.0))) / (n * n)
-            if lf[j, 13] != 0.0:
-                s = 1.0 if c >= lf[j, 7] else 0.0
+            if math.isnan(lf[j, 5]):
+                s = 1.0 if c >= lf[j, 3] else 0.0
             else:
-                t = (c - lf[j, 7]) / (lf[j, 9] - lf[j, 7])
+                t = (c - lf[j, 3]) / (lf[j, 5] - lf[j, 3])
                 t = min(max(t, 0.0), 1.0)
                 s = t * t
     if model == MODEL_THESIS:
@@ -138,11 +147,11 @@ def pair(lf, j, lo, hi, c0, c1, c2, big_r, e2, model, w_obj, w_int):
         u1 = p1 - c1
         u2 = p2 - c2
         d_object = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-        return True, lf[j, 12] + w_obj * d_object + w_int * lf[j, 10] + lf[j, 11]
+        return True, lf[j, 7] + w_obj * d_object + w_int * rec[e, 6] + rec[e, 7]
     q = d2 / (r * r)
     w = max(0.0, 1.0 - q * q)
     g = 1.0 if e2 == 0.0 else min(1.0, 4.0 * r * r / e2)
-    return True, lf[j, 10] * w * w * g / (d2 + R0 * R0) * s + lf[j, 11]
+    return True, rec[e, 6] * w * w * g / (d2 + R0 * R0) * s + rec[e, 7]
 
 
 __all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "POINT", "SPOT", "pack_lights", "pair"]

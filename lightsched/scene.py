@@ -230,7 +230,7 @@ def validate_dt(dt: Any) -> float:
 def _first_bad(mask: np.ndarray) -> int | None:
     """Index of the first True row of a per-row mask (rows may have trailing axes)."""
     if mask.ndim > 1:
-        mask = mask.reshape(mask.shape[0], -1).any(axis=1)
+        mask = mask.reshape(mask.shape[0], int(np.prod(mask.shape[1:]))).any(axis=1)
     idx = np.flatnonzero(mask)
     return int(idx[0]) if idx.size else None
 

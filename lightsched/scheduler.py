@@ -18,7 +18,7 @@ import numpy as np
 
 from .frame import Frame, empty_frame
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
-from .pairs import build_grid, grid_shape, object_pass
+from .pairs import build_grid, cell_order, grid_shape, object_pass
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, Camera, Config, SceneAPI
 
@@ -71,7 +71,7 @@ class Scheduler(SceneAPI):
                                 frames.plane_p)
         t = _lap(seconds, "visibility", t)
 
-        lf, li = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
+        hot, lf = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
         is_dir = lights.type == DIRECTIONAL
         # Shadow stage not built yet: shadow_lights is empty, so "skip" drops every
         # light that may cast shadows (DESIGN section 2, Affects).
@@ -87,9 +87,9 @@ class Scheduler(SceneAPI):
         grid_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
         glob_rows = np.flatnonzero(compete & is_dir).astype(np.int32)
         n_vis = int(np.count_nonzero(vis_o))
-        no_grid = (np.zeros(4), np.zeros(3, np.int64), np.zeros(1, np.int64),
-                   np.zeros(0, np.int32), np.zeros((len(lights), 6), np.int32))
+        no_grid = (np.zeros(4), np.zeros(3, np.int64), np.zeros(1, np.int64), np.zeros((0, 6)))
         grid = no_grid
+        order = np.arange(len(objs), dtype=np.int64)
         if grid_rows.size == 0 or n_vis == 0:
             plan["pairs"] = "none: no competing light or no visible object"
         elif grid_rows.size * n_vis <= BRUTE_FORCE_PAIRS:
@@ -99,13 +99,13 @@ class Scheduler(SceneAPI):
             b = _visible_bounds(objs.bounds_min, objs.bounds_max, vis_o)
             cell = float(np.median(lights.radius[grid_rows]))
             origin, inv_h, dims = grid_shape(b[:3], b[3:], cell)
-            start, cell_lights, light_cells, big = build_grid(lf, grid_rows, origin, inv_h,
-                                                             dims)
-            grid = (np.append(origin, inv_h), dims, start, cell_lights, light_cells)
+            start, cell_data, big = build_grid(hot, grid_rows, origin, inv_h, dims)
+            grid = (np.append(origin, inv_h), dims, start, cell_data)
             glob_rows = np.concatenate([big, glob_rows])
             plan["pairs"] = (f"grid ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                             f"{1 / inv_h:.3g} m, {cell_lights.size} entries, "
+                             f"{1 / inv_h:.3g} m, {cell_data.shape[0]} entries, "
                              f"{big.size} lights too big for it)")
+            order = cell_order(objs.bounds_min, objs.bounds_max, vis_o, grid[0], dims)
         t = _lap(seconds, "grid", t)
 
         reset = objs.is_new | ~objs.get("was_visible")
@@ -121,7 +121,7 @@ class Scheduler(SceneAPI):
         params = np.array([model, cfg.w_obj, cfg.w_int, cfg.hysteresis, cfg.hysteresis_abs,
                            _rate(dt, cfg.fade_in), _rate(dt, cfg.fade_out), cfg.fade_in,
                            cfg.fade_out])
-        object_pass((objs.bounds_min, objs.bounds_max, objs.mask, vis_o, reset), (lf, li), grid,
+        object_pass((objs.bounds_min, objs.bounds_max, objs.mask, vis_o, reset, order), (hot, lf), grid,
                     glob_rows, state_in, state_out, out, params)
         t = _lap(seconds, "objects", t)
 

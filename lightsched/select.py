@@ -18,11 +18,24 @@ def ranks_before(key_a, id_a, key_b, id_b):
     return key_a > key_b or (key_a == key_b and id_a < id_b)
 
 
+# Per-object scratch, one row per quantity and K columns: float64 sf[F_ROWS, K] and int64
+# si[I_ROWS, K]. Two matrices instead of many small arrays keep the inlined per-object code
+# free of array views (their reference counting costs more than the pair tests).
+F_KEY, F_P, F_OLD_P, F_OLD_W, F_NEW_W, F_NEW_P = range(6)
+F_ROWS = 6
+(I_ID, I_ROW, I_OLD_ID, I_OLD_ROW, I_OLD_ST, I_PREV_SEL, I_NEW_ID, I_NEW_ROW, I_NEW_ST,
+ I_HAS_SLOT, I_TAKEN) = range(11)
+I_ROWS = 11
+
+
 @nb.njit(cache=True, nogil=True, inline="always")
-def hysteresis_key(p, lid, prev_selected, h, h_abs):
-    """P, raised by h|P| + h_abs if lid was selected last frame (selection only)."""
-    for m in range(prev_selected.shape[0]):
-        q = prev_selected[m]
+def hysteresis_key(p, lid, si, h, h_abs):
+    """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL).
+
+    pairs._consider fuses a copy of this rule with its old-slot lookup (one loop over K).
+    """
+    for m in range(si.shape[1]):
+        q = si[I_PREV_SEL, m]
         if q < 0:
             break
         if q == lid:
@@ -31,20 +44,21 @@ def hysteresis_key(p, lid, prev_selected, h, h_abs):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def topk_insert(best_key, best_id, best_p, best_row, nbest, key, lid, p, row):
-    """Inserts one candidate into the sorted top-K arrays; returns the new size."""
-    k = best_key.shape[0]
-    if nbest == k and not ranks_before(key, lid, best_key[k - 1], best_id[k - 1]):
+def topk_insert(sf, si, nbest, key, lid, p, row):
+    """Inserts one candidate into the sorted top-K rows (F_KEY, F_P, I_ID, I_ROW); returns
+    the new size."""
+    k = sf.shape[1]
+    if nbest == k and not ranks_before(key, lid, sf[F_KEY, k - 1], si[I_ID, k - 1]):
         return nbest
     i = nbest if nbest < k else k - 1
-    while i > 0 and ranks_before(key, lid, best_key[i - 1], best_id[i - 1]):
-        best_key[i] = best_key[i - 1]
-        best_id[i] = best_id[i - 1]
-        best_p[i] = best_p[i - 1]
-        best_row[i] = best_row[i - 1]
+    while i > 0 and ranks_before(key, lid, sf[F_KEY, i - 1], si[I_ID, i - 1]):
+        sf[F_KEY, i] = sf[F_KEY, i - 1]
+        sf[F_P, i] = sf[F_P, i - 1]
+        si[I_ID, i] = si[I_ID, i - 1]
+        si[I_ROW, i] = si[I_ROW, i - 1]
         i -= 1
-    best_key[i] = key
-    best_id[i] = lid
-    best_p[i] = p
-    best_row[i] = row
+    sf[F_KEY, i] = key
+    sf[F_P, i] = p
+    si[I_ID, i] = lid
+    si[I_ROW, i] = row
     return nbest + 1 if nbest < k else k

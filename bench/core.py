@@ -1,0 +1,304 @@
+"""Core benchmark: frame time of lightsched.Scheduler on seeded cities with moving lights.
+
+    python bench/core.py                      # (10k, 1k) and (100k, 10k), 20 timed frames
+    python bench/core.py --sizes 10k:1k --frames 50
+    python bench/core.py --write              # also writes the tables into bench/RESULTS.md
+
+For each size (N objects, L lights): a ``lightsched.scenes.city`` with K = 8, default Config
+(fade on), the sun and about 1% of the other lights casting shadows (``--no-shadows``: none).
+Every frame moves every light (``update_lights`` with new positions, not timed); only
+``s.frame(...)`` is timed. A few warm-up frames run first (they include numba compilation).
+Reported: median and p10..p90 of frame time, and the median of each stage of
+``frame.stats["seconds"]``.
+
+Then a small city runs through both ``lightsched.reference.Scheduler`` (the float64 oracle)
+and ``lightsched.Scheduler`` on the same frames: median times, their ratio, and the number
+of (frame, object) rows whose light_ids differ (0 expected; DESIGN section 4 allows
+near-ties only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import lightsched
+from lightsched import Config
+from lightsched.scenes import DT, city, move_lights
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "RESULTS.md"
+BEGIN = "<!-- bench/core.py: begin (generated, do not edit by hand) -->"
+END = "<!-- bench/core.py: end -->"
+
+
+def say(msg: str = "") -> None:
+    print(msg, flush=True)
+
+
+def parse_count(text: str) -> int:
+    m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([kKmM]?)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"bad count {text!r} (e.g. 1000, 10k, 1m)")
+    scale = {"": 1, "k": 1_000, "m": 1_000_000}[m.group(2).lower()]
+    return int(round(float(m.group(1)) * scale))
+
+
+def parse_sizes(text: str) -> list[tuple[int, int]]:
+    out = []
+    for part in text.split(","):
+        if ":" not in part:
+            raise argparse.ArgumentTypeError(f"bad size {part!r} (want N:L, e.g. 10k:1k)")
+        n, l = part.split(":", 1)
+        out.append((parse_count(n), parse_count(l)))
+    return out
+
+
+def fmt_count(n: int) -> str:
+    if n >= 1_000_000 and n % 1_000_000 == 0:
+        return f"{n // 1_000_000}M"
+    if n >= 1000 and n % 1000 == 0:
+        return f"{n // 1000}k"
+    return str(n)
+
+
+def make_scene(n: int, l: int, seed: int, shadows: bool) -> Any:
+    return city(n, l, seed=seed, shadow_fraction=0.01 if shadows else 0.0, sun_shadows=shadows)
+
+
+def stage_names(seconds: list[dict[str, float]]) -> list[str]:
+    names: list[str] = []
+    for d in seconds:
+        names.extend(k for k in d if k not in names)
+    return names
+
+
+def run_sequence(cls: type, scene: Any, config: Config, frames: int, skip: int,
+                 keep_ids: bool = False, progress: bool = False) -> dict[str, Any]:
+    """Steps ``skip + frames`` frames, lights moving every frame; times the last ``frames``."""
+    s = cls(config)
+    s.set_lights(**scene.lights)
+    s.set_objects(**scene.objects)
+    times: list[float] = []
+    seconds: list[dict[str, float]] = []
+    ids: list[np.ndarray] = []
+    warm: list[float] = []
+    f = None
+    for i in range(skip + frames):
+        if i > 0:
+            s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, i))
+        t0 = time.perf_counter()
+        f = s.frame(scene.cameras, dt=DT)
+        t = time.perf_counter() - t0
+        if progress:
+            say(f"     frame {i}: {t * 1e3:.1f} ms")
+        if i < skip:
+            warm.append(t)
+            continue
+        times.append(t)
+        seconds.append(dict((f.stats or {}).get("seconds", {}) or {}))
+        if keep_ids:
+            ids.append(np.asarray(f.light_ids).copy())
+    assert f is not None
+    vis = np.asarray(f.visible)
+    return {
+        "times": np.asarray(times),
+        "warm": warm,
+        "seconds": seconds,
+        "ids": ids,
+        "plan": dict((f.stats or {}).get("plan", {}) or {}),
+        "visible_objects": int(vis.sum()),
+        "visible_lights": int(np.asarray(f.visible_lights).size),
+        "mean_set": float(np.asarray(f.count)[vis].mean()) if vis.any() else 0.0,
+        "shadow_lights": int(np.asarray(f.shadow_lights).size),
+        "casters": int(np.asarray(f.caster_ids).size),
+    }
+
+
+def bench_size(n: int, l: int, args: argparse.Namespace) -> dict[str, Any]:
+    say(f"\n== N={fmt_count(n)} objects, L={fmt_count(l)} lights, K={args.max_lights}")
+    t0 = time.perf_counter()
+    scene = make_scene(n, l, args.seed, not args.no_shadows)
+    say(f"   scene built in {time.perf_counter() - t0:.2f} s "
+        f"({int(scene.lights['shadows'].sum())} shadowed lights)")
+    say(f"   {args.warmup} warm-up frames, then {args.frames} timed frames ...")
+    r = run_sequence(lightsched.Scheduler, scene, Config(max_lights=args.max_lights),
+                     args.frames, args.warmup)
+    ms = r["times"] * 1e3
+    r.update(n=n, l=l, median=float(np.median(ms)), p10=float(np.percentile(ms, 10)),
+             p90=float(np.percentile(ms, 90)))
+    r["stages"] = {k: float(np.median([d.get(k, 0.0) for d in r["seconds"]])) * 1e3
+                   for k in stage_names(r["seconds"])}
+    warm = ", ".join(f"{w * 1e3:.0f}" for w in r["warm"])
+    say(f"   warm-up frames (ms): {warm}")
+    say(f"   frame: median {r['median']:.2f} ms, p10..p90 {r['p10']:.2f}..{r['p90']:.2f} ms")
+    for k, v in r["stages"].items():
+        say(f"     {k:<20} {v:9.3f} ms")
+    say(f"   last frame: {r['visible_objects']} visible objects, {r['visible_lights']} visible "
+        f"lights, mean set {r['mean_set']:.2f}, {r['shadow_lights']} shadowed lights, "
+        f"{r['casters']} casters")
+    if r["plan"]:
+        say("   plan: " + ", ".join(f"{k}={v}" for k, v in r["plan"].items()))
+    return r
+
+
+def bench_compare(n: int, l: int, args: argparse.Namespace) -> dict[str, Any] | None:
+    say(f"\n== oracle vs fast: N={fmt_count(n)}, L={fmt_count(l)}, {args.compare_frames} frames")
+    try:
+        from lightsched.reference import Scheduler as RefScheduler
+    except ImportError as e:
+        say(f"   skipped: lightsched.reference is not available ({e})")
+        return None
+    scene = make_scene(n, l, args.seed, not args.no_shadows)
+    config = Config(max_lights=args.max_lights)
+    frames = args.compare_frames
+    say("   oracle ...")
+    ref = run_sequence(RefScheduler, scene, config, frames, 0, keep_ids=True,
+                       progress=True)
+    say("   fast ...")
+    fast = run_sequence(lightsched.Scheduler, scene, config, frames, 0, keep_ids=True)
+    rows = sum(int(np.any(a != b, axis=1).sum()) if a.shape == b.shape else a.shape[0]
+               for a, b in zip(ref["ids"], fast["ids"], strict=True))
+    # Frame 0 pays numba compilation on a cold start; medians use frames after the first.
+    ref_ms = float(np.median(ref["times"][1:] if frames > 1 else ref["times"])) * 1e3
+    fast_ms = float(np.median(fast["times"][1:] if frames > 1 else fast["times"])) * 1e3
+    ratio = ref_ms / fast_ms if fast_ms > 0 else float("inf")
+    say(f"   oracle {ref_ms:.1f} ms/frame, fast {fast_ms:.3f} ms/frame, "
+        f"oracle/fast = {ratio:.3g}")
+    say(f"   light_ids mismatches: {rows} rows of {frames * n} (frames x objects)")
+    return {"n": n, "l": l, "frames": frames, "ref_ms": ref_ms, "fast_ms": fast_ms,
+            "ratio": ratio, "mismatches": rows, "rows": frames * n}
+
+
+def machine() -> dict[str, str]:
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        nproc = str(len(os.sched_getaffinity(0)))
+    except AttributeError:
+        nproc = str(os.cpu_count())
+    import numba
+
+    return {"cpu": cpu, "nproc": nproc, "python": platform.python_version(),
+            "numpy": np.__version__, "numba": numba.__version__,
+            "numba_threads": str(numba.get_num_threads()),
+            "os": f"{platform.system()} {platform.release()}"}
+
+
+def git_commit() -> str:
+    def git(*a: str) -> str:
+        return subprocess.run(["git", *a], cwd=HERE.parent, capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    try:
+        rev = git("rev-parse", "--short", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no")
+        return rev + (" (with uncommitted changes)" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def render(results: list[dict[str, Any]], compare: dict[str, Any] | None,
+           args: argparse.Namespace) -> str:
+    m = machine()
+    cmd = "python bench/core.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
+    shadows = "none" if args.no_shadows else "the sun and ~1% of the other lights"
+    out = [BEGIN, "", f"Generated {time.strftime('%Y-%m-%d %H:%M %Z')} by `{cmd}` at commit "
+           f"`{git_commit()}`.", "",
+           f"Machine: {m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads), "
+           f"{m['os']}; Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}.", "",
+           f"Scenes: `lightsched.scenes.city(N, L, seed={args.seed})` (10% spots, one sun; "
+           f"shadowed: {shadows}), one camera (fov_y 60 degrees, 16:9, 1080 px); "
+           f"K = {args.max_lights}, default Config (fade on, exact precision). Every light "
+           f"moves every frame; only `Scheduler.frame` is timed, {args.frames} frames after "
+           f"{args.warmup} warm-up frames.", ""]
+    stages = stage_names([r["stages"] for r in results])
+    head = ["N", "L", "median ms", "p10..p90 ms", *[f"{s} ms" for s in stages],
+            "visible obj", "mean set"]
+    out.append("| " + " | ".join(head) + " |")
+    out.append("|" + "---|" * len(head))
+    for r in results:
+        cells = [fmt_count(r["n"]), fmt_count(r["l"]), f"{r['median']:.2f}",
+                 f"{r['p10']:.2f}..{r['p90']:.2f}",
+                 *[f"{r['stages'].get(s, 0.0):.2f}" for s in stages],
+                 str(r["visible_objects"]), f"{r['mean_set']:.2f}"]
+        out.append("| " + " | ".join(cells) + " |")
+    out.append("")
+    if compare is not None:
+        out += ["Oracle (`lightsched.reference.Scheduler`) against the fast path on the same "
+                f"{compare['frames']} frames (medians over frames after the first):", "",
+                "| N | L | oracle ms | fast ms | oracle/fast | light_ids mismatches |",
+                "|---|---|---|---|---|---|",
+                f"| {fmt_count(compare['n'])} | {fmt_count(compare['l'])} | "
+                f"{compare['ref_ms']:.1f} | {compare['fast_ms']:.3f} | {compare['ratio']:.3g} | "
+                f"{compare['mismatches']} of {compare['rows']} rows |", ""]
+    out.append(END)
+    return "\n".join(out) + "\n"
+
+
+def write_results(section: str) -> None:
+    if RESULTS.exists():
+        text = RESULTS.read_text()
+        if BEGIN in text and END in text:
+            a = text.index(BEGIN)
+            b = text.index(END) + len(END)
+            text = text[:a] + section.rstrip("\n") + text[b:]
+        else:
+            text = text.rstrip("\n") + "\n\n" + section
+    else:
+        text = ("# Benchmark results\n\nCore frame-time benchmark (`bench/core.py`). The section "
+                "below is regenerated by `python bench/core.py --write`; notes outside it "
+                "are kept.\n\n" + section)
+    RESULTS.write_text(text)
+    say(f"\nwrote {RESULTS}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", type=parse_sizes, default=parse_sizes("10k:1k,100k:10k"),
+                   help="comma-separated N:L pairs (default 10k:1k,100k:10k)")
+    p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
+    p.add_argument("--warmup", type=int, default=3, help="warm-up frames (default 3)")
+    p.add_argument("--max-lights", type=int, default=8, help="K (default 8)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-shadows", action="store_true", help="no light casts shadows")
+    p.add_argument("--compare", type=str, default="1000:100",
+                   help="N:L of the oracle comparison, or 'none' (default 1000:100)")
+    p.add_argument("--compare-frames", type=int, default=10,
+                   help="frames of the oracle comparison (default 10)")
+    p.add_argument("--write", action="store_true", help="write the tables into bench/RESULTS.md")
+    args = p.parse_args(argv)
+    if args.frames < 1 or args.warmup < 1 or args.compare_frames < 1:
+        p.error("--frames, --warmup and --compare-frames must be >= 1")
+
+    m = machine()
+    say(f"lightsched {lightsched.__version__} at {git_commit()}; {m['cpu']}, {m['nproc']} CPUs, "
+        f"numba {m['numba']} ({m['numba_threads']} threads)")
+    results = [bench_size(n, l, args) for n, l in args.sizes]
+    compare = None
+    if args.compare.strip().lower() != "none":
+        (cn, cl), = parse_sizes(args.compare)
+        compare = bench_compare(cn, cl, args)
+    if args.write:
+        write_results(render(results, compare, args))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
