@@ -59,18 +59,24 @@ def _cell(x, origin, inv_h, dim):
 
 @nb.njit(cache=True, nogil=True)
 def build_grid(hot, rows, origin, inv_h, dims):
-    """Cell lists (CSR) of the lights in ``rows``; returns (cell_start, cell_data, big_rows).
+    """Cell lists (CSR) of the lights in ``rows``; returns (cell_start, cell_sphere,
+    cell_code, big_rows).
 
-    Each entry of cell_data [M, 8] is a copy of the light's 64-byte record (priority.py)
-    whose code carries 3 more bits, bit a set when this cell is the light's first along
-    axis a; scanning a cell is then a linear walk, and a point light's pair is computed
-    without touching any other light array."""
+    An entry is 20 bytes, so scanning a cell streams little memory: cell_sphere [M, 4]
+    float32 holds the light's centre relative to the grid origin and its radius grown so
+    that the float32 test "d2 <= r*r" can only err towards passing (the exact float64 test
+    of priority.pair decides); cell_code [M] int32 is row * 8 + bits, bit a set when this
+    cell is the light's first along axis a.
+    """
     n_l = hot.shape[0]
     light_cells = np.zeros((n_l, 6), np.int32)
     ncell = dims[0] * dims[1] * dims[2]
     counts = np.zeros(ncell + 1, np.int64)
     is_big = np.zeros(rows.shape[0], np.bool_)
     n_big = 0
+    reach = 0.0  # largest |coordinate - origin| a float32 test will see
+    for a in range(3):
+        reach = max(reach, dims[a] / inv_h)
     for t in range(rows.shape[0]):
         j = rows[t]
         r = hot[j, 3]
@@ -87,13 +93,19 @@ def build_grid(hot, rows, origin, inv_h, dims):
             is_big[t] = True
             n_big += 1
             continue
+        for a in range(3):
+            reach = max(reach, abs(hot[j, a] - origin[a]) + r)
         for x in range(light_cells[j, 0], light_cells[j, 3] + 1):
             for y in range(light_cells[j, 1], light_cells[j, 4] + 1):
                 for z in range(light_cells[j, 2], light_cells[j, 5] + 1):
                     counts[(x * dims[1] + y) * dims[2] + z + 1] += 1
     for c in range(ncell):
         counts[c + 1] += counts[c]
-    cell_data = np.empty((counts[ncell], 8))
+    # Each float32 coordinate is off by at most 2^-24 of its magnitude (<= reach), twice
+    # per axis (light and box) plus the subtraction: grow r by 4 * 2^-23 * reach per axis.
+    grow = 4.0 * 2.0**-23 * reach * math.sqrt(3.0)
+    cell_sphere = np.empty((counts[ncell], 4), np.float32)
+    cell_code = np.empty(counts[ncell], np.int32)
     fill = counts[:ncell].copy()
     big_rows = np.empty(n_big, np.int32)
     b = 0
@@ -103,18 +115,19 @@ def build_grid(hot, rows, origin, inv_h, dims):
             big_rows[b] = j
             b += 1
             continue
+        r32 = np.float32((hot[j, 3] + grow) * (1.0 + 1e-5))
         for x in range(light_cells[j, 0], light_cells[j, 3] + 1):
             for y in range(light_cells[j, 1], light_cells[j, 4] + 1):
                 for z in range(light_cells[j, 2], light_cells[j, 5] + 1):
                     c = (x * dims[1] + y) * dims[2] + z
                     e = fill[c]
                     fill[c] += 1
-                    for a in range(8):
-                        cell_data[e, a] = hot[j, a]
-                    first = ((x == light_cells[j, 0]) * 1 + (y == light_cells[j, 1]) * 2
-                             + (z == light_cells[j, 2]) * 4)
-                    cell_data[e, 5] += first
-    return counts, cell_data, big_rows
+                    for a in range(3):
+                        cell_sphere[e, a] = np.float32(hot[j, a] - origin[a])
+                    cell_sphere[e, 3] = r32
+                    cell_code[e] = (j * 8 + (x == light_cells[j, 0]) * 1
+                                    + (y == light_cells[j, 1]) * 2 + (z == light_cells[j, 2]) * 4)
+    return counts, cell_sphere, cell_code, big_rows
 
 
 def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, float, np.ndarray]:
@@ -130,16 +143,15 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _consider(rec, e, lf, box, geo, sf, si, nbest, cand, cfg):
+def _consider(rec, e, lf, ids, box, geo, sf, si, nbest, cand, cfg):
     """One light record against the current object: Affects, P, hysteresis key, top-K
     insert, and this frame's P / row for the object's old slot of that light. geo = (c0,
     c1, c2, big_r, e2); cfg = (model, w_obj, w_int, h, h_abs). Returns (nbest, cand)."""
-    hit, p = pair(rec, e, lf, box, geo[0], geo[1], geo[2], geo[3], geo[4], cfg[0], cfg[1],
-                  cfg[2])
+    hit, p = pair(rec, e, lf, box, geo, cfg[0], cfg[1], cfg[2])
     if not hit:
         return nbest, cand
     j = np.int64(rec[e, 5]) >> 5
-    lid = np.int64(lf[j, 6])
+    lid = np.int64(ids[j])  # a 4-byte array stays in cache; lf rows would not
     key = p
     for m in range(sf.shape[1]):
         if si[I_PREV_SEL, m] == lid:
@@ -151,17 +163,25 @@ def _consider(rec, e, lf, box, geo, sf, si, nbest, cand, cfg):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _scan_grid(om, lf, box, geo, sf, si, nbest, cand, cfg, grid):
+def _scan_grid(om, hot, lf, ids, box, geo, sf, si, nbest, cand, cfg, grid):
     """Walks the grid cells the box overlaps; a pair is taken only in the first cell light
     and object share: along each axis that cell is the object's first or the light's first
-    (the entry's bits). Returns (nbest, cand)."""
-    g_f, dims, cell_start, cell_data = grid
+    (the entry's bits). A conservative float32 sphere-box test filters before the exact
+    pair. Returns (nbest, cand)."""
+    g_f, dims, cell_start, cell_sphere, cell_code = grid
     x0 = _cell(box[0], g_f[0], g_f[3], dims[0])
     y0 = _cell(box[1], g_f[1], g_f[3], dims[1])
     z0 = _cell(box[2], g_f[2], g_f[3], dims[2])
     x1 = _cell(box[3], g_f[0], g_f[3], dims[0])
     y1 = _cell(box[4], g_f[1], g_f[3], dims[1])
     z1 = _cell(box[5], g_f[2], g_f[3], dims[2])
+    lo0 = np.float32(box[0] - g_f[0])
+    lo1 = np.float32(box[1] - g_f[1])
+    lo2 = np.float32(box[2] - g_f[2])
+    hi0 = np.float32(box[3] - g_f[0])
+    hi1 = np.float32(box[4] - g_f[1])
+    hi2 = np.float32(box[5] - g_f[2])
+    zero = np.float32(0.0)
     for x in range(x0, x1 + 1):
         need = 0 if x == x0 else 1
         for y in range(y0, y1 + 1):
@@ -170,11 +190,22 @@ def _scan_grid(om, lf, box, geo, sf, si, nbest, cand, cfg, grid):
             for z in range(z0, z1 + 1):
                 need_z = need_y | (0 if z == z0 else 4)
                 for e in range(cell_start[base + z], cell_start[base + z + 1]):
-                    if np.int64(cell_data[e, 5]) & need_z != need_z:
+                    code = cell_code[e]
+                    if code & need_z != need_z:
                         continue
-                    if np.int64(cell_data[e, 4]) & om == 0:
+                    q0 = cell_sphere[e, 0]
+                    q1 = cell_sphere[e, 1]
+                    q2 = cell_sphere[e, 2]
+                    r = cell_sphere[e, 3]
+                    dx = max(lo0 - q0, zero, q0 - hi0)
+                    dy = max(lo1 - q1, zero, q1 - hi1)
+                    dz = max(lo2 - q2, zero, q2 - hi2)
+                    if dx * dx + dy * dy + dz * dz > r * r:
                         continue
-                    nbest, cand = _consider(cell_data, e, lf, box, geo, sf, si, nbest, cand,
+                    j = code >> 3
+                    if np.int64(hot[j, 4]) & om == 0:
+                        continue
+                    nbest, cand = _consider(hot, j, lf, ids, box, geo, sf, si, nbest, cand,
                                             cfg)
     return nbest, cand
 
@@ -210,15 +241,15 @@ def object_pass(objs, lights, grid, glob, state_in, state_out, out, params):
     """For every object: affecting lights, P, top-K with hysteresis, fade, output rows.
 
     objs = (bounds_min, bounds_max, mask, visible, reset, order), objects walked in
-    ``order``; lights = (light_hot, light_f) (priority.py); grid = (origin and 1/h [4],
-    dims, cell_start, cell_data), dims all 0 for no grid; glob = light rows every object
+    ``order``; lights = (light_hot, light_f, light ids) (priority.py); grid = (origin and 1/h [4],
+    dims, cell_start, cell_sphere, cell_code), dims all 0 for no grid; glob = light rows every object
     tests; state_in / state_out = (slot ids, slot weights f64, slot states, selected ids),
     each [N, K]; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
     count, candidates); params = (model, w_obj, w_int, h, h_abs, dt/fade_in, dt/fade_out,
     fade_in, fade_out).
     """
     lo_all, hi_all, omask, visible, reset, order = objs
-    hot, lf = lights
+    hot, lf, ids = lights
     s_id, s_w, s_st, s_sel = state_in
     n_id, n_w, n_st, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
@@ -261,13 +292,13 @@ def object_pass(objs, lights, grid, glob, state_in, state_out, out, params):
                     si[I_OLD_ROW, m] = -1
                 geo = (c0, c1, c2, big_r, e2)
                 if use_grid:
-                    nbest, cand = _scan_grid(om, lf, box, geo, sf, si, nbest, cand, cfg,
-                                             grid)
+                    nbest, cand = _scan_grid(om, hot, lf, ids, box, geo, sf, si, nbest,
+                                             cand, cfg, grid)
                 for t in range(glob.shape[0]):
                     j = glob[t]
                     if np.int64(hot[j, 4]) & om != 0:
-                        nbest, cand = _consider(hot, j, lf, box, geo, sf, si, nbest, cand,
-                                                cfg)
+                        nbest, cand = _consider(hot, j, lf, ids, box, geo, sf, si, nbest,
+                                                cand, cfg)
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):
                 if m < cnt:

@@ -97,14 +97,71 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def pair(rec, e, lf, box, c0, c1, c2, big_r, e2, model, w_obj, w_int):
+def box_d2(box, p0, p1, p2):
+    """Squared distance from p to the box: delta_k = max(lo_k - p_k, 0, p_k - hi_k)."""
+    dx = max(box[0] - p0, 0.0, p0 - box[3])
+    dy = max(box[1] - p1, 0.0, p1 - box[4])
+    dz = max(box[2] - p2, 0.0, p2 - box[5])
+    return dx * dx + dy * dy + dz * dz
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def falloff(i, r, d2, e2):
+    """i*w*w*g/(d2 + r0*r0) of the contribution model: q = d2/(r*r), w = max(0, 1 - q*q),
+    g = min(1, 4 r*r / e2) (1 for e2 = 0). P = falloff * s + p_user."""
+    q = d2 / (r * r)
+    w = max(0.0, 1.0 - q * q)
+    g = 1.0 if e2 == 0.0 else min(1.0, 4.0 * r * r / e2)
+    return i * w * w * g / (d2 + R0 * R0)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def spot_cone(lf, j, p0, p1, p2, geo, contribution):
+    """(meets, s) of spot row j and the object's bounding sphere geo = (c0, c1, c2, R, e2):
+    the one-nappe cone test, and the spot factor s of the contribution model (1 when not
+    needed). c is the cosine of the smallest angle from the axis to the sphere."""
+    v0 = geo[0] - p0
+    v1 = geo[1] - p1
+    v2 = geo[2] - p2
+    big_r = geo[3]
+    n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    a = v0 * lf[j, 0] + v1 * lf[j, 1] + v2 * lf[j, 2]
+    sq = math.sqrt(max(n * n - big_r * big_r, 0.0))
+    if not (n <= big_r or a >= lf[j, 3] * sq - big_r * lf[j, 4]):
+        return False, 0.0
+    if not contribution:
+        return True, 1.0
+    if n <= big_r or a >= sq or n * n == 0.0:
+        c = 1.0  # (n*n == 0 only when n*n underflows: the light is on the centre)
+    else:
+        c = (a * sq + big_r * math.sqrt(max(n * n - a * a, 0.0))) / (n * n)
+    if math.isnan(lf[j, 5]):
+        return True, 1.0 if c >= lf[j, 3] else 0.0
+    t = (c - lf[j, 3]) / (lf[j, 5] - lf[j, 3])
+    t = min(max(t, 0.0), 1.0)
+    return True, t * t
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def thesis(lf, j, p0, p1, p2, i, p_user, geo, w_obj, w_int):
+    """Eriksson eq. 3.1 with the camera term A = max over cameras (light_f column 7)."""
+    u0 = p0 - geo[0]
+    u1 = p1 - geo[1]
+    u2 = p2 - geo[2]
+    d_object = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    return lf[j, 7] + w_obj * d_object + w_int * i + p_user
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def pair(rec, e, lf, box, geo, model, w_obj, w_int):
     """(affects, P) of the light whose record is rec[e] (layout above) and the box
-    [box[0:3], box[3:6]] with centre c, radius big_r and squared diagonal e2.
+    [box[0:3], box[3:6]] with geo = (centre c0, c1, c2, radius R, squared diagonal e2).
 
     DESIGN section 2: point, d2 <= r*r; spot, that and the one-nappe cone test; directional,
     always (masks and visibility are checked by the caller). P by the configured model:
     "contribution" (windowed falloff, size and spot factors) or "thesis" (Eriksson eq. 3.1,
     camera term precomputed per light); directional lights have P = i + p_user.
+    pairs.object_pass runs the same pieces batched over an object's grid hits.
     """
     code = np.int64(rec[e, 5])
     typ = (code >> 3) & 3
@@ -113,45 +170,18 @@ def pair(rec, e, lf, box, c0, c1, c2, big_r, e2, model, w_obj, w_int):
     p0 = rec[e, 0]
     p1 = rec[e, 1]
     p2 = rec[e, 2]
-    r = rec[e, 3]
-    dx = max(box[0] - p0, 0.0, p0 - box[3])
-    dy = max(box[1] - p1, 0.0, p1 - box[4])
-    dz = max(box[2] - p2, 0.0, p2 - box[5])
-    d2 = dx * dx + dy * dy + dz * dz
-    if not d2 <= r * r:
+    d2 = box_d2(box, p0, p1, p2)
+    if not d2 <= rec[e, 3] * rec[e, 3]:
         return False, 0.0
     j = code >> 5
     s = 1.0
     if typ == SPOT:
-        v0 = c0 - p0
-        v1 = c1 - p1
-        v2 = c2 - p2
-        n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        a = v0 * lf[j, 0] + v1 * lf[j, 1] + v2 * lf[j, 2]
-        sq = math.sqrt(max(n * n - big_r * big_r, 0.0))
-        if not (n <= big_r or a >= lf[j, 3] * sq - big_r * lf[j, 4]):
+        meets, s = spot_cone(lf, j, p0, p1, p2, geo, model == MODEL_CONTRIBUTION)
+        if not meets:
             return False, 0.0
-        if model == MODEL_CONTRIBUTION:
-            if n <= big_r or a >= sq or n * n == 0.0:
-                c = 1.0  # (n*n == 0 only when n*n underflows: the light is on the centre)
-            else:
-                c = (a * sq + big_r * math.sqrt(max(n * n - a * a, 0.0))) / (n * n)
-            if math.isnan(lf[j, 5]):
-                s = 1.0 if c >= lf[j, 3] else 0.0
-            else:
-                t = (c - lf[j, 3]) / (lf[j, 5] - lf[j, 3])
-                t = min(max(t, 0.0), 1.0)
-                s = t * t
     if model == MODEL_THESIS:
-        u0 = p0 - c0
-        u1 = p1 - c1
-        u2 = p2 - c2
-        d_object = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-        return True, lf[j, 7] + w_obj * d_object + w_int * rec[e, 6] + rec[e, 7]
-    q = d2 / (r * r)
-    w = max(0.0, 1.0 - q * q)
-    g = 1.0 if e2 == 0.0 else min(1.0, 4.0 * r * r / e2)
-    return True, rec[e, 6] * w * w * g / (d2 + R0 * R0) * s + rec[e, 7]
+        return True, thesis(lf, j, p0, p1, p2, rec[e, 6], rec[e, 7], geo, w_obj, w_int)
+    return True, falloff(rec[e, 6], rec[e, 3], d2, geo[4]) * s + rec[e, 7]
 
 
 __all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "POINT", "SPOT", "pack_lights", "pair"]

@@ -87,7 +87,8 @@ class Scheduler(SceneAPI):
         grid_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
         glob_rows = np.flatnonzero(compete & is_dir).astype(np.int32)
         n_vis = int(np.count_nonzero(vis_o))
-        no_grid = (np.zeros(4), np.zeros(3, np.int64), np.zeros(1, np.int64), np.zeros((0, 6)))
+        no_grid = (np.zeros(4), np.zeros(3, np.int64), np.zeros(1, np.int64),
+                   np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
         grid = no_grid
         order = np.arange(len(objs), dtype=np.int64)
         if grid_rows.size == 0 or n_vis == 0:
@@ -99,11 +100,11 @@ class Scheduler(SceneAPI):
             b = _visible_bounds(objs.bounds_min, objs.bounds_max, vis_o)
             cell = float(np.median(lights.radius[grid_rows]))
             origin, inv_h, dims = grid_shape(b[:3], b[3:], cell)
-            start, cell_data, big = build_grid(hot, grid_rows, origin, inv_h, dims)
-            grid = (np.append(origin, inv_h), dims, start, cell_data)
+            start, cell_sphere, cell_code, big = build_grid(hot, grid_rows, origin, inv_h, dims)
+            grid = (np.append(origin, inv_h), dims, start, cell_sphere, cell_code)
             glob_rows = np.concatenate([big, glob_rows])
             plan["pairs"] = (f"grid ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                             f"{1 / inv_h:.3g} m, {cell_data.shape[0]} entries, "
+                             f"{1 / inv_h:.3g} m, {cell_code.size} entries, "
                              f"{big.size} lights too big for it)")
             order = cell_order(objs.bounds_min, objs.bounds_max, vis_o, grid[0], dims)
         t = _lap(seconds, "grid", t)
@@ -121,7 +122,8 @@ class Scheduler(SceneAPI):
         params = np.array([model, cfg.w_obj, cfg.w_int, cfg.hysteresis, cfg.hysteresis_abs,
                            _rate(dt, cfg.fade_in), _rate(dt, cfg.fade_out), cfg.fade_in,
                            cfg.fade_out])
-        object_pass((objs.bounds_min, objs.bounds_max, objs.mask, vis_o, reset, order), (hot, lf), grid,
+        object_pass((objs.bounds_min, objs.bounds_max, objs.mask, vis_o, reset, order),
+                    (hot, lf, lights.id), grid,
                     glob_rows, state_in, state_out, out, params)
         t = _lap(seconds, "objects", t)
 
