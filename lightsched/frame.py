@@ -34,6 +34,12 @@ FRAME_ARRAYS: dict[str, Any] = {
 }
 
 
+# Per-object arrays and the value of an empty slot (DESIGN section 3).
+_PER_OBJECT = {"visible": False, "count": 0, "candidates": 0, "light_ids": -1,
+               "light_index": -1, "priority": 0, "fade_weight": 0, "fade_state": 0,
+               "slot_shadow": -1}
+
+
 @dataclass
 class Frame:
     """One frame's result. Object rows are in ascending object id (DESIGN section 3)."""
@@ -62,9 +68,23 @@ class Frame:
         return {name: getattr(self, name) for name in FRAME_ARRAYS}
 
 
-def empty_frame(object_id: np.ndarray, k: int, n_cameras: int, cascades: int) -> Frame:
-    """A frame where no object has a light: empty slots as DESIGN section 3 defines them."""
+def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
+    """A frame where no object has a light (empty slots as DESIGN section 3 defines them),
+    except for the arrays ``given``, which are taken as they are (not copied)."""
     n = object_id.size
+    if given:
+        empty = empty_frame(np.zeros(0, np.int32), k, cascades)
+        fields = {name: given.get(name) for name in FRAME_ARRAYS}
+        for name, arr in fields.items():
+            if arr is None:
+                arr = getattr(empty, name)
+                if arr.ndim and arr.shape[0] == 0 and name in _PER_OBJECT:
+                    fill = _PER_OBJECT[name]
+                    arr = np.full((n,) + arr.shape[1:], fill, arr.dtype)
+                fields[name] = arr
+        if "object_id" not in given:
+            fields["object_id"] = object_id.astype(np.int32, copy=True)
+        return Frame(**fields)
     return Frame(
         object_id=object_id.astype(np.int32, copy=True),
         visible=np.zeros(n, np.bool_),

@@ -1,18 +1,27 @@
-"""Light-object pairs: a uniform grid (or brute force) and the fused object pass.
+"""Light-object pairs (DESIGN section 2, "Affects") and the object pass that consumes them.
 
-Takes the packed lights (priority.py layout), the rows of the lights that compete for slots,
-and the object store; finds for every visible object the lights that affect it (DESIGN
-section 2, "Affects"; the test itself lives in priority.pair) without materialising pairs:
-the object pass walks the grid cells an object overlaps, computes P, keeps the top K with
-hysteresis (select.py) and steps the fade machine (fade.py), all in one parallel loop over
-objects. Each object writes only its own rows, so the output does not depend on the thread
-count or on the order in which threads run.
+Takes the packed lights (priority.py), the rows of the lights that compete for slots and
+the object store; returns per visible object its affecting lights with their P, grouped by
+object, then runs top-K with hysteresis (select.py) and the fade machine (fade.py) per
+object. Pairs are plain arrays (row, P), never Python objects.
 
-The grid stores each point/spot light in every cell its bounding cube overlaps (widened by
-a relative 1e-9 so rounding never drops a pair); an object visits the cells of its box and
-takes a light only in the first cell both share, so no pair is seen twice. Lights that would
-cover too many cells, and directional lights in slots, go to a short list every object
-tests (the "global" lights).
+The work is light-major, in four kernels:
+1. ``visible_order`` + ``visible_objects``: visible objects sorted by the grid cell of their
+   centre (a counting sort), with compact float32 boxes; objects larger than a cell go to a
+   short list every light tests.
+2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
+   the centre of an object it reaches (its bounding cube widened by the largest object
+   half-extent), each column one contiguous run of objects; a conservative float32
+   sphere-box test filters, then the exact float64 Affects test and P (priority.py). Each
+   light writes its own segment of the pair buffers, sized beforehand by ``light_bounds``,
+   so the result does not depend on the thread count. The light is fixed in the inner
+   loop: its type and data stay in registers, and the objects it meets are neighbours in
+   memory.
+3. ``group_pairs``: a counting sort of the pairs by object row (lights in ascending row,
+   that is ascending id, within an object).
+4. ``object_pass`` (parallel over objects in row order): state in, selection, fade, outputs
+   out, all sequential in memory.
+A scene small enough for brute force is the same pipeline with a single cell.
 """
 
 from __future__ import annotations
@@ -23,7 +32,8 @@ import numba as nb
 import numpy as np
 
 from .fade import fade_object
-from .priority import pair
+from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
+from .scene import DIRECTIONAL, SPOT
 from .select import (
     F_NEW_P,
     F_NEW_W,
@@ -43,8 +53,9 @@ from .select import (
 )
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
-MAX_CELLS_PER_LIGHT = 512    # a light covering more is tested against every object
-CHUNK = 256                  # objects per parallel work item (scratch is per chunk)
+GROUP_PARTS = 2              # independent histograms when grouping pairs by object
+OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
+F32_ULP = 2.0**-23           # float32 rounding is at most half of this, relative
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -57,81 +68,9 @@ def _cell(x, origin, inv_h, dim):
     return int(v)
 
 
-@nb.njit(cache=True, nogil=True)
-def build_grid(hot, rows, origin, inv_h, dims):
-    """Cell lists (CSR) of the lights in ``rows``; returns (cell_start, cell_sphere,
-    cell_code, big_rows).
-
-    An entry is 20 bytes, so scanning a cell streams little memory: cell_sphere [M, 4]
-    float32 holds the light's centre relative to the grid origin and its radius grown so
-    that the float32 test "d2 <= r*r" can only err towards passing (the exact float64 test
-    of priority.pair decides); cell_code [M] int32 is row * 8 + bits, bit a set when this
-    cell is the light's first along axis a.
-    """
-    n_l = hot.shape[0]
-    light_cells = np.zeros((n_l, 6), np.int32)
-    ncell = dims[0] * dims[1] * dims[2]
-    counts = np.zeros(ncell + 1, np.int64)
-    is_big = np.zeros(rows.shape[0], np.bool_)
-    n_big = 0
-    reach = 0.0  # largest |coordinate - origin| a float32 test will see
-    for a in range(3):
-        reach = max(reach, dims[a] / inv_h)
-    for t in range(rows.shape[0]):
-        j = rows[t]
-        r = hot[j, 3]
-        covered = 1
-        for a in range(3):
-            p = hot[j, a]
-            slack = r * 1e-9 + abs(p) * 1e-15
-            c0 = _cell(p - r - slack, origin[a], inv_h, dims[a])
-            c1 = _cell(p + r + slack, origin[a], inv_h, dims[a])
-            light_cells[j, a] = c0
-            light_cells[j, 3 + a] = c1
-            covered *= c1 - c0 + 1
-        if covered > MAX_CELLS_PER_LIGHT:
-            is_big[t] = True
-            n_big += 1
-            continue
-        for a in range(3):
-            reach = max(reach, abs(hot[j, a] - origin[a]) + r)
-        for x in range(light_cells[j, 0], light_cells[j, 3] + 1):
-            for y in range(light_cells[j, 1], light_cells[j, 4] + 1):
-                for z in range(light_cells[j, 2], light_cells[j, 5] + 1):
-                    counts[(x * dims[1] + y) * dims[2] + z + 1] += 1
-    for c in range(ncell):
-        counts[c + 1] += counts[c]
-    # Each float32 coordinate is off by at most 2^-24 of its magnitude (<= reach), twice
-    # per axis (light and box) plus the subtraction: grow r by 4 * 2^-23 * reach per axis.
-    grow = 4.0 * 2.0**-23 * reach * math.sqrt(3.0)
-    cell_sphere = np.empty((counts[ncell], 4), np.float32)
-    cell_code = np.empty(counts[ncell], np.int32)
-    fill = counts[:ncell].copy()
-    big_rows = np.empty(n_big, np.int32)
-    b = 0
-    for t in range(rows.shape[0]):
-        j = rows[t]
-        if is_big[t]:
-            big_rows[b] = j
-            b += 1
-            continue
-        r32 = np.float32((hot[j, 3] + grow) * (1.0 + 1e-5))
-        for x in range(light_cells[j, 0], light_cells[j, 3] + 1):
-            for y in range(light_cells[j, 1], light_cells[j, 4] + 1):
-                for z in range(light_cells[j, 2], light_cells[j, 5] + 1):
-                    c = (x * dims[1] + y) * dims[2] + z
-                    e = fill[c]
-                    fill[c] += 1
-                    for a in range(3):
-                        cell_sphere[e, a] = np.float32(hot[j, a] - origin[a])
-                    cell_sphere[e, 3] = r32
-                    cell_code[e] = (j * 8 + (x == light_cells[j, 0]) * 1
-                                    + (y == light_cells[j, 1]) * 2 + (z == light_cells[j, 2]) * 4)
-    return counts, cell_sphere, cell_code, big_rows
-
-
-def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, float, np.ndarray]:
-    """(origin, 1/h, dims) for a box, cell edge ``cell`` grown until at most MAX_CELLS."""
+def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(origin + 1/h as float64[4], dims int64[3]) covering the box with cells of edge
+    ``cell``, grown until there are at most MAX_CELLS."""
     extent = np.maximum(hi - lo, 0.0)
     h = max(cell, float(extent.max()) / MAX_CELLS ** (1 / 3) * 1.0001, 1e-300)
     while True:
@@ -139,166 +78,329 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
         if int(np.prod(dims)) <= MAX_CELLS:
             break
         h *= 1.25
-    return lo.astype(np.float64), 1.0 / h, dims
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _consider(rec, e, lf, ids, box, geo, sf, si, nbest, cand, cfg):
-    """One light record against the current object: Affects, P, hysteresis key, top-K
-    insert, and this frame's P / row for the object's old slot of that light. geo = (c0,
-    c1, c2, big_r, e2); cfg = (model, w_obj, w_int, h, h_abs). Returns (nbest, cand)."""
-    hit, p = pair(rec, e, lf, box, geo, cfg[0], cfg[1], cfg[2])
-    if not hit:
-        return nbest, cand
-    j = np.int64(rec[e, 5]) >> 5
-    lid = np.int64(ids[j])  # a 4-byte array stays in cache; lf rows would not
-    key = p
-    for m in range(sf.shape[1]):
-        if si[I_PREV_SEL, m] == lid:
-            key = p + cfg[3] * abs(p) + cfg[4]
-        if si[I_OLD_ID, m] == lid:
-            sf[F_OLD_P, m] = p
-            si[I_OLD_ROW, m] = j
-    return topk_insert(sf, si, nbest, key, lid, p, j), cand + 1
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _scan_grid(om, hot, lf, ids, box, geo, sf, si, nbest, cand, cfg, grid):
-    """Walks the grid cells the box overlaps; a pair is taken only in the first cell light
-    and object share: along each axis that cell is the object's first or the light's first
-    (the entry's bits). A conservative float32 sphere-box test filters before the exact
-    pair. Returns (nbest, cand)."""
-    g_f, dims, cell_start, cell_sphere, cell_code = grid
-    x0 = _cell(box[0], g_f[0], g_f[3], dims[0])
-    y0 = _cell(box[1], g_f[1], g_f[3], dims[1])
-    z0 = _cell(box[2], g_f[2], g_f[3], dims[2])
-    x1 = _cell(box[3], g_f[0], g_f[3], dims[0])
-    y1 = _cell(box[4], g_f[1], g_f[3], dims[1])
-    z1 = _cell(box[5], g_f[2], g_f[3], dims[2])
-    lo0 = np.float32(box[0] - g_f[0])
-    lo1 = np.float32(box[1] - g_f[1])
-    lo2 = np.float32(box[2] - g_f[2])
-    hi0 = np.float32(box[3] - g_f[0])
-    hi1 = np.float32(box[4] - g_f[1])
-    hi2 = np.float32(box[5] - g_f[2])
-    zero = np.float32(0.0)
-    for x in range(x0, x1 + 1):
-        need = 0 if x == x0 else 1
-        for y in range(y0, y1 + 1):
-            need_y = need | (0 if y == y0 else 2)
-            base = (x * dims[1] + y) * dims[2]
-            for z in range(z0, z1 + 1):
-                need_z = need_y | (0 if z == z0 else 4)
-                for e in range(cell_start[base + z], cell_start[base + z + 1]):
-                    code = cell_code[e]
-                    if code & need_z != need_z:
-                        continue
-                    q0 = cell_sphere[e, 0]
-                    q1 = cell_sphere[e, 1]
-                    q2 = cell_sphere[e, 2]
-                    r = cell_sphere[e, 3]
-                    dx = max(lo0 - q0, zero, q0 - hi0)
-                    dy = max(lo1 - q1, zero, q1 - hi1)
-                    dz = max(lo2 - q2, zero, q2 - hi2)
-                    if dx * dx + dy * dy + dz * dz > r * r:
-                        continue
-                    j = code >> 3
-                    if np.int64(hot[j, 4]) & om == 0:
-                        continue
-                    nbest, cand = _consider(hot, j, lf, ids, box, geo, sf, si, nbest, cand,
-                                            cfg)
-    return nbest, cand
+    return np.append(lo.astype(np.float64), 1.0 / h), dims
 
 
 @nb.njit(cache=True, nogil=True)
-def cell_order(lo, hi, visible, g_f, dims):
-    """Objects in grid-cell order of their centres (a counting sort): neighbours then share
-    lights in cache. Invisible objects go last. Returns int64[N]."""
+def visible_order(lo, hi, visible, g_f, dims):
+    """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
+    in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N] (-1
+    for invisible), cell_start int64[ncell+1]): the objects centred in cell c are
+    positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run."""
     n = lo.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     key = np.empty(n, np.int64)
-    counts = np.zeros(ncell + 2, np.int64)
+    counts = np.zeros(ncell + 1, np.int64)
     for o in range(n):
         if visible[o]:
             x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
             y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[3], dims[1])
             z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[3], dims[2])
             key[o] = (x * dims[1] + y) * dims[2] + z
-        else:
-            key[o] = ncell
-        counts[key[o] + 1] += 1
-    for c in range(ncell + 1):
+            counts[key[o] + 1] += 1
+    for c in range(ncell):
         counts[c + 1] += counts[c]
-    order = np.empty(n, np.int64)
+    cell_start = counts.copy()
+    vis_rows = np.empty(counts[ncell], np.int64)
+    pos_of = np.full(n, -1, np.int64)
     for o in range(n):
-        order[counts[key[o]]] = o
-        counts[key[o]] += 1
-    return order
+        if visible[o]:
+            pos_of[o] = counts[key[o]]
+            vis_rows[counts[key[o]]] = o
+            counts[key[o]] += 1
+    return vis_rows, pos_of, cell_start
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def object_pass(objs, lights, grid, glob, state_in, state_out, out, params):
-    """For every object: affecting lights, P, top-K with hysteresis, fade, output rows.
+def visible_objects(lo, hi, omask, vis_rows, g_f):
+    """Per visible position (parallel): vis_box [V, 6] float64, vis_box32 [6, V] float32
+    (relative to the grid origin, for the filter; one row per bound so the filter
+    vectorises), vis_geo [V, 5] = (centre, bounding
+    radius R = |hi - lo|/2, e2 = |hi - lo|^2), vis_mask [V], big [V] (an object with a
+    half-extent over one cell edge: every light tests it directly, and its float32 box is
+    +inf so the cell scan never takes it) and the largest half-extent per axis of the
+    others, which widens every light's cell range."""
+    nv = vis_rows.shape[0]
+    vis_box = np.empty((nv, 6))
+    vis_box32 = np.empty((6, nv), np.float32)
+    vis_geo = np.empty((nv, 5))
+    vis_mask = np.empty(nv, np.int64)
+    big = np.zeros(nv, np.bool_)
+    cell_edge = 1.0 / g_f[3]
+    for v in nb.prange(nv):
+        o = vis_rows[v]
+        for a in range(3):
+            vis_box[v, a] = lo[o, a]
+            vis_box[v, 3 + a] = hi[o, a]
+            vis_box32[a, v] = np.float32(lo[o, a] - g_f[a])
+            vis_box32[3 + a, v] = np.float32(hi[o, a] - g_f[a])
+            if (hi[o, a] - lo[o, a]) / 2 > cell_edge:
+                big[v] = True
+        if big[v]:
+            for a in range(6):
+                vis_box32[a, v] = np.inf
+        ex = hi[o, 0] - lo[o, 0]
+        ey = hi[o, 1] - lo[o, 1]
+        ez = hi[o, 2] - lo[o, 2]
+        e2 = ex * ex + ey * ey + ez * ez
+        vis_geo[v, 0] = (lo[o, 0] + hi[o, 0]) / 2
+        vis_geo[v, 1] = (lo[o, 1] + hi[o, 1]) / 2
+        vis_geo[v, 2] = (lo[o, 2] + hi[o, 2]) / 2
+        vis_geo[v, 3] = math.sqrt(e2) / 2
+        vis_geo[v, 4] = e2
+        vis_mask[v] = omask[o]
+    ext = np.zeros(3)
+    for v in range(nv):
+        if not big[v]:
+            for a in range(3):
+                ext[a] = max(ext[a], (vis_box[v, 3 + a] - vis_box[v, a]) / 2)
+    big_pos = np.flatnonzero(big).astype(np.int32)
+    return vis_box, vis_box32, vis_geo, vis_mask, big_pos, ext
 
-    objs = (bounds_min, bounds_max, mask, visible, reset, order), objects walked in
-    ``order``; lights = (light_hot, light_f, light ids) (priority.py); grid = (origin and 1/h [4],
-    dims, cell_start, cell_sphere, cell_code), dims all 0 for no grid; glob = light rows every object
-    tests; state_in / state_out = (slot ids, slot weights f64, slot states, selected ids),
-    each [N, K]; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
-    count, candidates); params = (model, w_obj, w_int, h, h_abs, dt/fade_in, dt/fade_out,
-    fade_in, fade_out).
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _light_cells(hot, j, g_f, dims, ext):
+    """The clamped range of the cells that can hold the centre of an object light j
+    reaches: its bounding cube widened by the largest object half-extent (and a relative
+    1e-9 so rounding never drops a pair); empty (x1 < x0) if that misses the grid."""
+    r = hot[j, 3]
+    out = np.empty(6, np.int64)
+    for a in range(3):
+        p = hot[j, a]
+        reach = r + ext[a]
+        slack = reach * 1e-9 + abs(p) * 1e-15
+        lo = p - reach - slack
+        hi = p + reach + slack
+        top = g_f[a] + dims[a] / g_f[3]
+        if hi < g_f[a] or lo > top:
+            out[0] = 1
+            out[3] = 0
+            return out
+        out[a] = _cell(lo, g_f[a], g_f[3], dims[a])
+        out[3 + a] = _cell(hi, g_f[a], g_f[3], dims[a])
+    return out
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def light_bounds(hot, rows, grid, n_vis):
+    """Upper bound of the pairs each light in ``rows`` can emit (objects centred in its
+    cells plus the big objects; every visible object for a directional light)."""
+    g_f, dims, cell_start, ext, big_pos = grid
+    out = np.zeros(rows.shape[0], np.int64)
+    for t in nb.prange(rows.shape[0]):
+        j = rows[t]
+        if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
+            out[t] = n_vis
+            continue
+        c = _light_cells(hot, j, g_f, dims, ext)
+        total = big_pos.shape[0]
+        for x in range(c[0], c[3] + 1):
+            for y in range(c[1], c[4] + 1):
+                base = (x * dims[1] + y) * dims[2]
+                total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
+        out[t] = total
+    return out
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int):
+    """(affects, P) of light j and visible object v once d2 <= r*r holds: the spot cone and
+    the model's P (priority.py holds the rules)."""
+    geo = (vis_geo[v, 0], vis_geo[v, 1], vis_geo[v, 2], vis_geo[v, 3], vis_geo[v, 4])
+    s = 1.0
+    if typ == SPOT:
+        meets, s = spot_cone(hot, lf, j, geo, model == MODEL_CONTRIBUTION)
+        if not meets:
+            return False, 0.0
+    if model == MODEL_CONTRIBUTION:
+        return True, falloff(hot[j, 6], hot[j, 3], d2, geo[4]) * s + hot[j, 7]
+    return True, thesis(hot, lf, j, geo, w_obj, w_int)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def light_pass(lights, rows, grid, vis, offsets, pair_pos, pair_p, params):
+    """For each light in ``rows`` (parallel), its affecting pairs with visible objects:
+    pair_pos / pair_p [offsets[t] : offsets[t] + count[t]] = (visible position, P).
+
+    lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
+    big_pos); vis = (vis_box, vis_box32, vis_geo, vis_mask); params = (model, w_obj,
+    w_int). Returns count per light."""
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    vis_box, vis_box32, vis_geo, vis_mask = vis
+    model = int(params[0])
+    w_obj = params[1]
+    w_int = params[2]
+    n_vis = vis_box.shape[0]
+    reach = 0.0
+    for a in range(3):
+        reach = max(reach, dims[a] / g_f[3])
+    count = np.zeros(rows.shape[0], np.int64)
+    for t in nb.prange(rows.shape[0]):
+        j = rows[t]
+        lm = np.int64(hot[j, 4])
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        n = offsets[t]
+        if typ == DIRECTIONAL:
+            p = hot[j, 6] + hot[j, 7]
+            for v in range(n_vis):
+                if vis_mask[v] & lm != 0:
+                    pair_pos[n] = v
+                    pair_p[n] = p
+                    n += 1
+            count[t] = n - offsets[t]
+            continue
+        r = hot[j, 3]
+        c = _light_cells(hot, j, g_f, dims, ext)
+        q0 = np.float32(hot[j, 0] - g_f[0])
+        q1 = np.float32(hot[j, 1] - g_f[1])
+        q2 = np.float32(hot[j, 2] - g_f[2])
+        # Coordinates near the grid are at most ``reach`` from its origin; each float32
+        # value is off by at most half an ulp of that, twice per axis plus the subtraction,
+        # so this grown radius can only let the filter pass more pairs, never fewer.
+        far = reach + abs(hot[j, 0] - g_f[0]) + abs(hot[j, 1] - g_f[1]) + abs(hot[j, 2] - g_f[2])
+        r32 = np.float32((r + 4.0 * F32_ULP * far * math.sqrt(3.0)) * (1.0 + 1e-5))
+        rr32 = r32 * r32
+        zero = np.float32(0.0)
+        keep = np.empty(256, np.uint8)
+        for x in range(c[0], c[3] + 1):
+            for y in range(c[1], c[4] + 1):
+                base = (x * dims[1] + y) * dims[2]
+                # The objects centred in a column of cells are one run of positions;
+                # the filter runs branch-free over the run (it vectorises), then the
+                # exact test visits the survivors.
+                v0 = cell_start[base + c[2]]
+                v1 = cell_start[base + c[5] + 1]
+                if v1 - v0 > keep.shape[0]:
+                    keep = np.empty(2 * (v1 - v0), np.uint8)
+                for v in range(v0, v1):
+                    dx = max(max(vis_box32[0, v] - q0, q0 - vis_box32[3, v]), zero)
+                    dy = max(max(vis_box32[1, v] - q1, q1 - vis_box32[4, v]), zero)
+                    dz = max(max(vis_box32[2, v] - q2, q2 - vis_box32[5, v]), zero)
+                    keep[v - v0] = np.uint8(dx * dx + dy * dy + dz * dz <= rr32)
+                for v in range(v0, v1):
+                    if keep[v - v0] == 0:
+                        continue
+                    if vis_mask[v] & lm == 0:
+                        continue
+                    d2 = box_d2(vis_box[v], hot[j, 0], hot[j, 1], hot[j, 2])
+                    if not d2 <= r * r:
+                        continue
+                    hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+                    if hit:
+                        pair_pos[n] = v
+                        pair_p[n] = p
+                        n += 1
+        for b in range(big_pos.shape[0]):
+            v = big_pos[b]
+            if vis_mask[v] & lm == 0:
+                continue
+            d2 = box_d2(vis_box[v], hot[j, 0], hot[j, 1], hot[j, 2])
+            if not d2 <= r * r:
+                continue
+            hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+            if hit:
+                pair_pos[n] = v
+                pair_p[n] = p
+                n += 1
+        count[t] = n - offsets[t]
+    return count
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
+    """Counting sort of the pairs by object row, so the object pass reads its lists in
+    the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
+    its own histogram (parallel); within an object the runs follow each other, so its
+    lights stay in ascending row order whatever the thread count. Returns (start [N+1],
+    obj_light int32 [H], obj_p [H])."""
+    n_l = rows.shape[0]
+    hist = np.zeros((GROUP_PARTS, n_obj + 1), np.int64)
+    for q in nb.prange(GROUP_PARTS):
+        for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
+            for e in range(offsets[t], offsets[t] + count[t]):
+                hist[q, vis_rows[pair_pos[e]]] += 1
+    start = np.empty(n_obj + 1, np.int64)
+    run = 0
+    for o in range(n_obj):
+        start[o] = run
+        for q in range(GROUP_PARTS):
+            c = hist[q, o]
+            hist[q, o] = run
+            run += c
+    start[n_obj] = run
+    obj_light = np.empty(run, np.int32)
+    obj_p = np.empty(run)
+    for q in nb.prange(GROUP_PARTS):
+        for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
+            j = rows[t]
+            for e in range(offsets[t], offsets[t] + count[t]):
+                o = vis_rows[pair_pos[e]]
+                d = hist[q, o]
+                obj_light[d] = j
+                obj_p[d] = pair_p[e]
+                hist[q, o] = d + 1
+    return start, obj_light, obj_p
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _select(p, j, ids, sf, si, nbest, h, h_abs):
+    """Offers light row j with priority p to the object's top K: hysteresis key, insert,
+    and this frame's P / row for the object's old slot of that light. Returns nbest.
+    (Fuses select.hysteresis_key with the old-slot lookup: one loop over K.)"""
+    lid = np.int64(ids[j])
+    key = p
+    for m in range(sf.shape[1]):
+        if si[I_PREV_SEL, m] == lid:
+            key = p + h * abs(p) + h_abs
+        if si[I_OLD_ID, m] == lid:
+            sf[F_OLD_P, m] = p
+            si[I_OLD_ROW, m] = j
+    return topk_insert(sf, si, nbest, key, lid, p, j)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def object_pass(objs, lists, ids, state_in, state_out, out, params):
+    """For every object (parallel, rows in order): top-K with hysteresis, fade, outputs.
+
+    objs = (visible, reset): whether the object starts with its selected lights on
+    (step 3 of Fade); lists = (start, obj_light, obj_p) from
+    group_pairs; ids = light ids by row; state_in / state_out = (slot ids, slot weights
+    f64, slot states, selected ids), each [N, K]; out = (light_ids, light_index, priority
+    f32, fade_weight f32, fade_state, count, candidates); params = (h, h_abs, dt/fade_in,
+    dt/fade_out, fade_in, fade_out).
     """
-    lo_all, hi_all, omask, visible, reset, order = objs
-    hot, lf, ids = lights
+    visible, reset = objs
+    start, obj_light, obj_p = lists
     s_id, s_w, s_st, s_sel = state_in
     n_id, n_w, n_st, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
-    cfg = (int(params[0]), params[1], params[2], params[3], params[4])
-    inc = params[5]
-    dec = params[6]
-    fade_in = params[7]
-    fade_out = params[8]
-    use_grid = grid[1][0] > 0
-    n_obj = lo_all.shape[0]
+    h = params[0]
+    h_abs = params[1]
+    inc = params[2]
+    dec = params[3]
+    fade_in = params[4]
+    fade_out = params[5]
+    n_obj = visible.shape[0]
     k = s_id.shape[1]
-    n_chunks = (n_obj + CHUNK - 1) // CHUNK
+    n_chunks = (n_obj + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
-        box = np.empty(6)
-        for t_o in range(ch * CHUNK, min(n_obj, (ch + 1) * CHUNK)):
-            o = order[t_o]
+        for o in range(ch * OBJECT_CHUNK, min(n_obj, (ch + 1) * OBJECT_CHUNK)):
             cnt = 0
             nbest = 0
             cand = 0
             if visible[o]:
-                for a in range(3):
-                    box[a] = lo_all[o, a]
-                    box[3 + a] = hi_all[o, a]
-                c0 = (box[0] + box[3]) / 2
-                c1 = (box[1] + box[4]) / 2
-                c2 = (box[2] + box[5]) / 2
-                ex = box[3] - box[0]
-                ey = box[4] - box[1]
-                ez = box[5] - box[2]
-                e2 = ex * ex + ey * ey + ez * ez
-                big_r = math.sqrt(e2) / 2
-                om = np.int64(omask[o])
                 for m in range(k):
                     si[I_OLD_ID, m] = s_id[o, m]
                     sf[F_OLD_W, m] = s_w[o, m]
                     si[I_OLD_ST, m] = s_st[o, m]
                     si[I_PREV_SEL, m] = s_sel[o, m]
                     si[I_OLD_ROW, m] = -1
-                geo = (c0, c1, c2, big_r, e2)
-                if use_grid:
-                    nbest, cand = _scan_grid(om, hot, lf, ids, box, geo, sf, si, nbest,
-                                             cand, cfg, grid)
-                for t in range(glob.shape[0]):
-                    j = glob[t]
-                    if np.int64(hot[j, 4]) & om != 0:
-                        nbest, cand = _consider(hot, j, lf, ids, box, geo, sf, si, nbest,
-                                                cand, cfg)
+                for t in range(start[o], start[o + 1]):
+                    nbest = _select(obj_p[t], obj_light[t], ids, sf, si, nbest, h, h_abs)
+                cand = start[o + 1] - start[o]
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):
                 if m < cnt:

@@ -1,15 +1,16 @@
 """The Affects test and the two priority models (DESIGN section 2, "Affects", "Priority").
 
 Takes a packed light row (see ``pack_lights``) and an object's box; returns whether the light
-affects the object and the pair's priority P. The per-pair functions are inlined into the
-fused object pass of pairs.py; this module owns their definitions.
+affects the object and the pair's priority P, as pieces: ``box_d2`` (the range test is
+d2 <= r*r), ``spot_cone`` (cone test and spot factor s), ``falloff`` (contribution:
+P = falloff * s + p_user), ``thesis`` (Eriksson eq. 3.1); directional lights have
+P = i + p_user. pairs.light_pass composes them per pair; this module owns the rules.
 
 Packed lights, two float64 row arrays, so that a point light's whole pair computation
-reads one 64-byte record: ``light_hot[L, 8]`` (the record, also copied into the grid's
-cells by pairs.py): 0-2 position, 3 radius, 4 mask, 5 code = row * 32 + type * 8 (the
-low 3 bits are the grid's first-cell bits), 6 intensity i, 7 user priority p_user (all
-exact in float64); ``light_f[L, 8]``: 0-2 axis (normalised direction), 3 cos(outer),
-4 sin(outer), 5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer
+reads one 64-byte record: ``light_hot[L, 8]``: 0-2 position, 3 radius, 4 mask, 5 code =
+row * 32 + type * 8, 6 intensity i, 7 user priority p_user (all exact in float64);
+``light_f[L, 8]``: 0-2 axis (normalised direction), 3 cos(outer), 4 sin(outer),
+5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer
 get cos(inner) = NaN, which selects the step profile.
 """
 
@@ -21,7 +22,7 @@ import numba as nb
 import numpy as np
 
 from .frustum import CameraFrames
-from .scene import DIRECTIONAL, POINT, SPOT, LightStore
+from .scene import DIRECTIONAL, LightStore
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
@@ -116,13 +117,13 @@ def falloff(i, r, d2, e2):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def spot_cone(lf, j, p0, p1, p2, geo, contribution):
+def spot_cone(hot, lf, j, geo, contribution):
     """(meets, s) of spot row j and the object's bounding sphere geo = (c0, c1, c2, R, e2):
     the one-nappe cone test, and the spot factor s of the contribution model (1 when not
     needed). c is the cosine of the smallest angle from the axis to the sphere."""
-    v0 = geo[0] - p0
-    v1 = geo[1] - p1
-    v2 = geo[2] - p2
+    v0 = geo[0] - hot[j, 0]
+    v1 = geo[1] - hot[j, 1]
+    v2 = geo[2] - hot[j, 2]
     big_r = geo[3]
     n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     a = v0 * lf[j, 0] + v1 * lf[j, 1] + v2 * lf[j, 2]
@@ -143,45 +144,15 @@ def spot_cone(lf, j, p0, p1, p2, geo, contribution):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def thesis(lf, j, p0, p1, p2, i, p_user, geo, w_obj, w_int):
-    """Eriksson eq. 3.1 with the camera term A = max over cameras (light_f column 7)."""
-    u0 = p0 - geo[0]
-    u1 = p1 - geo[1]
-    u2 = p2 - geo[2]
+def thesis(hot, lf, j, geo, w_obj, w_int):
+    """Eriksson eq. 3.1 with the camera term A = max over cameras (light_f column 7):
+    P = A + w_obj d_object + w_int i + p_user, d_object = |p - c|."""
+    u0 = hot[j, 0] - geo[0]
+    u1 = hot[j, 1] - geo[1]
+    u2 = hot[j, 2] - geo[2]
     d_object = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    return lf[j, 7] + w_obj * d_object + w_int * i + p_user
+    return lf[j, 7] + w_obj * d_object + w_int * hot[j, 6] + hot[j, 7]
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
-def pair(rec, e, lf, box, geo, model, w_obj, w_int):
-    """(affects, P) of the light whose record is rec[e] (layout above) and the box
-    [box[0:3], box[3:6]] with geo = (centre c0, c1, c2, radius R, squared diagonal e2).
-
-    DESIGN section 2: point, d2 <= r*r; spot, that and the one-nappe cone test; directional,
-    always (masks and visibility are checked by the caller). P by the configured model:
-    "contribution" (windowed falloff, size and spot factors) or "thesis" (Eriksson eq. 3.1,
-    camera term precomputed per light); directional lights have P = i + p_user.
-    pairs.object_pass runs the same pieces batched over an object's grid hits.
-    """
-    code = np.int64(rec[e, 5])
-    typ = (code >> 3) & 3
-    if typ == DIRECTIONAL:
-        return True, rec[e, 6] + rec[e, 7]
-    p0 = rec[e, 0]
-    p1 = rec[e, 1]
-    p2 = rec[e, 2]
-    d2 = box_d2(box, p0, p1, p2)
-    if not d2 <= rec[e, 3] * rec[e, 3]:
-        return False, 0.0
-    j = code >> 5
-    s = 1.0
-    if typ == SPOT:
-        meets, s = spot_cone(lf, j, p0, p1, p2, geo, model == MODEL_CONTRIBUTION)
-        if not meets:
-            return False, 0.0
-    if model == MODEL_THESIS:
-        return True, thesis(lf, j, p0, p1, p2, rec[e, 6], rec[e, 7], geo, w_obj, w_int)
-    return True, falloff(rec[e, 6], rec[e, 3], d2, geo[4]) * s + rec[e, 7]
-
-
-__all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "POINT", "SPOT", "pack_lights", "pair"]
+__all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "box_d2", "falloff", "pack_lights", "spot_cone",
+           "thesis"]

@@ -339,7 +339,7 @@ class Scheduler(SceneAPI):
                     directional[lt.id] = lt.intensity + lt.p_user
         directional_ids = _by_priority(directional)
 
-        frame = empty_frame(self.objects.id, k_max, len(cams), cfg.cascades)
+        frame = empty_frame(self.objects.id, k_max, cfg.cascades)
         row_of = {lt.id: lt.row for lt in lights}
         pairs = 0
         for ob in objects:

@@ -1,8 +1,9 @@
 """Scheduler and schedule(): run the stages of DESIGN section 2 on the fast path.
 
 Takes the stores (scene.py) and cameras; returns a Frame (frame.py). Stages, each timed in
-stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid
-(pairs.py), objects (pairs.object_pass: Affects, priority, top-K, fade fused), output.
+stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid,
+pairs (Affects and P per light), group (pairs by object), objects (top-K and fade per
+object), output; pairs.py describes the light-major pipeline.
 The per-object state (slots, weights, last frame's selection) lives in the object store's
 ``state`` so it follows ids through set_/remove_ calls; a frame computes the new state into
 fresh arrays and swaps it in only when everything succeeded.
@@ -18,12 +19,22 @@ import numpy as np
 
 from .frame import Frame, empty_frame
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
-from .pairs import build_grid, cell_order, grid_shape, object_pass
+from .pairs import (
+    grid_shape,
+    group_pairs,
+    light_bounds,
+    light_pass,
+    object_pass,
+    visible_objects,
+    visible_order,
+)
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, Camera, Config, SceneAPI
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
+# Grid cell edge over the median light radius (measured on the city bench, see RESULTS.md).
+CELL_PER_RADIUS = 1.0
 
 
 @nb.njit(cache=True, nogil=True)
@@ -52,6 +63,17 @@ class Scheduler(SceneAPI):
         for name, dtype, fill in _STATE:
             self.objects.add_state(name, (k,), dtype, fill)
         self.objects.add_state("was_visible", (), np.bool_, False)
+        self._buffers: dict[str, np.ndarray] = {}
+        self._spare_state: tuple[np.ndarray, ...] | None = None
+
+    def _scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
+        """A reusable buffer of at least ``size`` elements (grown by half when short), so a
+        steady scene allocates no pair memory per frame."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.size < size:
+            buf = np.empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
+            self._buffers[name] = buf
+        return buf
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg = self.config
@@ -84,65 +106,75 @@ class Scheduler(SceneAPI):
         directional = lights.id[dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]]
         t = _lap(seconds, "pack", t)
 
-        grid_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
-        glob_rows = np.flatnonzero(compete & is_dir).astype(np.int32)
+        rows = np.flatnonzero(compete).astype(np.int32)
+        point_rows = rows[~is_dir[rows]]
         n_vis = int(np.count_nonzero(vis_o))
-        no_grid = (np.zeros(4), np.zeros(3, np.int64), np.zeros(1, np.int64),
-                   np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
-        grid = no_grid
-        order = np.arange(len(objs), dtype=np.int64)
-        if grid_rows.size == 0 or n_vis == 0:
+        b = _visible_bounds(objs.bounds_min, objs.bounds_max, vis_o)
+        if n_vis == 0:
+            b = np.zeros(6)
+        if rows.size == 0 or n_vis == 0:
             plan["pairs"] = "none: no competing light or no visible object"
-        elif grid_rows.size * n_vis <= BRUTE_FORCE_PAIRS:
-            plan["pairs"] = f"brute force ({grid_rows.size} lights x {n_vis} objects)"
-            glob_rows = np.concatenate([grid_rows, glob_rows])
+        if point_rows.size * n_vis <= BRUTE_FORCE_PAIRS:
+            # One cell holding every visible object: each light tests them all.
+            g_f, dims = grid_shape(b[:3], b[3:], 2.0 * max(float(np.max(b[3:] - b[:3])), 1.0))
+            plan.setdefault("pairs", f"brute force ({rows.size} lights x {n_vis} objects)")
         else:
-            b = _visible_bounds(objs.bounds_min, objs.bounds_max, vis_o)
-            cell = float(np.median(lights.radius[grid_rows]))
-            origin, inv_h, dims = grid_shape(b[:3], b[3:], cell)
-            start, cell_sphere, cell_code, big = build_grid(hot, grid_rows, origin, inv_h, dims)
-            grid = (np.append(origin, inv_h), dims, start, cell_sphere, cell_code)
-            glob_rows = np.concatenate([big, glob_rows])
-            plan["pairs"] = (f"grid ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                             f"{1 / inv_h:.3g} m, {cell_code.size} entries, "
-                             f"{big.size} lights too big for it)")
-            order = cell_order(objs.bounds_min, objs.bounds_max, vis_o, grid[0], dims)
+            g_f, dims = grid_shape(b[:3], b[3:],
+                                   CELL_PER_RADIUS * float(np.median(lights.radius[point_rows])))
+        vis_rows, _, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
+                                                     g_f, dims)
+        vis_box, vis_box32, vis_geo, vis_mask, big_pos, ext = visible_objects(
+            objs.bounds_min, objs.bounds_max, objs.mask, vis_rows, g_f)
+        grid = (g_f, dims, cell_start, ext, big_pos)
+        if "pairs" not in plan:
+            plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
+                             f"{1 / g_f[3]:.3g} m, {big_pos.size} objects larger than a cell "
+                             f"tested directly), walked by {rows.size} lights")
         t = _lap(seconds, "grid", t)
+
+        model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
+        bounds = light_bounds(hot, rows, grid, n_vis)
+        offsets = np.zeros(rows.size + 1, np.int64)
+        np.cumsum(bounds, out=offsets[1:])
+        pair_pos = self._scratch("pair_pos", int(offsets[-1]), np.int32)
+        pair_p = self._scratch("pair_p", int(offsets[-1]), np.float64)
+        count = light_pass((hot, lf), rows, grid, (vis_box, vis_box32, vis_geo, vis_mask), offsets,
+                           pair_pos, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
+        t = _lap(seconds, "pairs", t)
+        lists = group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, len(objs))
+        t = _lap(seconds, "group", t)
 
         reset = objs.is_new | ~objs.get("was_visible")
         if self.frame_index == 0 or cut:
             reset = np.ones(len(objs), np.bool_)
         n = len(objs)
         state_in = tuple(objs.get(name) for name, _, _ in _STATE)
-        state_out = tuple(np.empty((n, k), dtype) for _, dtype, _ in _STATE)
+        state_out = self._spare_state
+        if state_out is None or state_out[0].shape != (n, k):
+            state_out = tuple(np.empty((n, k), dtype) for _, dtype, _ in _STATE)
         out = (np.empty((n, k), np.int32), np.empty((n, k), np.int32),
                np.empty((n, k), np.float32), np.empty((n, k), np.float32),
                np.empty((n, k), np.uint8), np.empty(n, np.int32), np.empty(n, np.int32))
-        model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
-        params = np.array([model, cfg.w_obj, cfg.w_int, cfg.hysteresis, cfg.hysteresis_abs,
-                           _rate(dt, cfg.fade_in), _rate(dt, cfg.fade_out), cfg.fade_in,
-                           cfg.fade_out])
-        object_pass((objs.bounds_min, objs.bounds_max, objs.mask, vis_o, reset, order),
-                    (hot, lf, lights.id), grid,
-                    glob_rows, state_in, state_out, out, params)
+        params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
+                           _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
+        object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params)
         t = _lap(seconds, "objects", t)
 
         for (name, _, _), arr in zip(_STATE, state_out, strict=True):
             objs.put(name, arr)
         objs.put("was_visible", vis_o)
-        frame = empty_frame(objs.id, k, len(cameras), cfg.cascades)
-        (frame.light_ids, frame.light_index, frame.priority, frame.fade_weight,
-         frame.fade_state, frame.count, frame.candidates) = out
-        frame.visible = vis_o.copy()
-        frame.directional_lights = directional.astype(np.int32)
-        frame.visible_lights = lights.id[vis_l]
-        frame.cascade_splits = splits
+        self._spare_state = state_in  # last frame's state: next frame writes over it
+        frame = empty_frame(
+            objs.id, k, cfg.cascades, visible=vis_o.copy(), count=out[5], candidates=out[6],
+            light_ids=out[0], light_index=out[1], priority=out[2], fade_weight=out[3],
+            fade_state=out[4], directional_lights=directional.astype(np.int32),
+            visible_lights=lights.id[vis_l], cascade_splits=splits)
         has_shadowed = bool(np.any(lights.shadows & vis_l))
         plan["visibility"] = f"frustum planes, {len(cameras)} camera(s)"
         plan["priority"] = cfg.model + " (exact float64)"
         if cfg.precision == "fast":
             plan["priority"] += "; precision 'fast' not built yet, ran exact"
-        plan["fade"] = "fused into the object pass"
+        plan["fade"] = "fused with selection in the object pass"
         plan["shadows"] = ("skipped: shadow stage not built yet" if has_shadowed
                            else "skipped: no visible shadowed light")
         t = _lap(seconds, "output", t)
@@ -156,6 +188,7 @@ class Scheduler(SceneAPI):
                 "visible_lights": int(np.count_nonzero(vis_l)),
                 "competing_lights": int(np.count_nonzero(compete)),
                 "pairs": int(frame.candidates.sum()),
+                "pair_bound": int(offsets[-1]),
                 "slots": int(frame.count.sum()),
                 "threads": nb.get_num_threads(),
             },

@@ -387,8 +387,6 @@ def test_no_lights():
     assert f.stats["counts"] == {"visible_objects": 1, "visible_lights": 0, "pairs": 0}
 
 
-@pytest.mark.xfail(raises=ValueError, strict=False,
-                   reason="scene._first_bad cannot reshape 0 rows of bounds (scene.py bug)")
 def test_empty_scene_and_shapes():
     f = ref.schedule(dict(id=[]), dict(id=[], bounds_min=np.zeros((0, 3)),
                                        bounds_max=np.zeros((0, 3))), [CAM],
