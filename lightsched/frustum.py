@@ -130,12 +130,12 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
     return out
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, parallel=True)
 def lights_visible(light_type, position, radius, plane_n, plane_p):
     """Point/spot: the ball (position, r) is in some frustum; directional: always."""
     n = light_type.shape[0]
     out = np.zeros(n, np.bool_)
-    for j in range(n):
+    for j in nb.prange(n):
         if light_type[j] == DIRECTIONAL:
             out[j] = True
             continue

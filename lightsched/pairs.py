@@ -81,34 +81,46 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
     return np.append(lo.astype(np.float64), 1.0 / h), dims
 
 
-@nb.njit(cache=True, nogil=True)
-def visible_order(lo, hi, visible, g_f, dims):
-    """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
-    in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N] (-1
-    for invisible), cell_start int64[ncell+1]): the objects centred in cell c are
-    positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run."""
+@nb.njit(cache=True, nogil=True, parallel=True)
+def _centre_cells(lo, hi, visible, g_f, dims):
     n = lo.shape[0]
-    ncell = dims[0] * dims[1] * dims[2]
     key = np.empty(n, np.int64)
-    counts = np.zeros(ncell + 1, np.int64)
-    for o in range(n):
+    for o in nb.prange(n):
         if visible[o]:
             x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
             y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[3], dims[1])
             z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[3], dims[2])
             key[o] = (x * dims[1] + y) * dims[2] + z
+        else:
+            key[o] = -1
+    return key
+
+
+@nb.njit(cache=True, nogil=True)
+def _counting_sort(key, ncell):
+    counts = np.zeros(ncell + 1, np.int64)
+    for o in range(key.shape[0]):
+        if key[o] >= 0:
             counts[key[o] + 1] += 1
     for c in range(ncell):
         counts[c + 1] += counts[c]
     cell_start = counts.copy()
     vis_rows = np.empty(counts[ncell], np.int64)
-    pos_of = np.full(n, -1, np.int64)
-    for o in range(n):
-        if visible[o]:
-            pos_of[o] = counts[key[o]]
+    for o in range(key.shape[0]):
+        if key[o] >= 0:
             vis_rows[counts[key[o]]] = o
             counts[key[o]] += 1
-    return vis_rows, pos_of, cell_start
+    return vis_rows, cell_start
+
+
+def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.ndarray,
+                  dims: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
+    in space become neighbours in memory). Returns (vis_rows int64[V], cell_start
+    int64[ncell+1]): the objects centred in cell c are positions cell_start[c] ..
+    cell_start[c+1]-1, so a column of cells is one run."""
+    key = _centre_cells(lo, hi, visible, g_f, dims)
+    return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -313,7 +325,8 @@ def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
     its own histogram (parallel); within an object the runs follow each other, so its
     lights stay in ascending row order whatever the thread count. Returns (start [N+1],
-    obj_light int32 [H], obj_p [H])."""
+    obj_pairs [H, 2] = (P, light row) per pair: one record, one cache line touched per
+    scattered pair)."""
     n_l = rows.shape[0]
     hist = np.zeros((GROUP_PARTS, n_obj + 1), np.int64)
     for q in nb.prange(GROUP_PARTS):
@@ -329,18 +342,17 @@ def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
             hist[q, o] = run
             run += c
     start[n_obj] = run
-    obj_light = np.empty(run, np.int32)
-    obj_p = np.empty(run)
+    obj_pairs = np.empty((run, 2))
     for q in nb.prange(GROUP_PARTS):
         for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
             j = rows[t]
             for e in range(offsets[t], offsets[t] + count[t]):
                 o = vis_rows[pair_pos[e]]
                 d = hist[q, o]
-                obj_light[d] = j
-                obj_p[d] = pair_p[e]
+                obj_pairs[d, 0] = pair_p[e]
+                obj_pairs[d, 1] = j
                 hist[q, o] = d + 1
-    return start, obj_light, obj_p
+    return start, obj_pairs
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -363,15 +375,14 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
 def object_pass(objs, lists, ids, state_in, state_out, out, params):
     """For every object (parallel, rows in order): top-K with hysteresis, fade, outputs.
 
-    objs = (visible, reset): whether the object starts with its selected lights on
-    (step 3 of Fade); lists = (start, obj_light, obj_p) from
-    group_pairs; ids = light ids by row; state_in / state_out = (slot ids, slot weights
-    f64, slot states, selected ids), each [N, K]; out = (light_ids, light_index, priority
-    f32, fade_weight f32, fade_state, count, candidates); params = (h, h_abs, dt/fade_in,
-    dt/fade_out, fade_in, fade_out).
+    objs = (visible, reset): reset marks objects that start with their selected lights on
+    (step 3 of Fade); lists = (start, obj_pairs) from group_pairs; ids = light ids by row;
+    state_in / state_out = (slot ids, slot weights f64, slot states, selected ids), each
+    [N, K]; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
+    count, candidates); params = (h, h_abs, dt/fade_in, dt/fade_out, fade_in, fade_out).
     """
     visible, reset = objs
-    start, obj_light, obj_p = lists
+    start, obj_pairs = lists
     s_id, s_w, s_st, s_sel = state_in
     n_id, n_w, n_st, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
@@ -399,7 +410,8 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
                     si[I_PREV_SEL, m] = s_sel[o, m]
                     si[I_OLD_ROW, m] = -1
                 for t in range(start[o], start[o + 1]):
-                    nbest = _select(obj_p[t], obj_light[t], ids, sf, si, nbest, h, h_abs)
+                    nbest = _select(obj_pairs[t, 0], np.int64(obj_pairs[t, 1]), ids, sf, si,
+                                    nbest, h, h_abs)
                 cand = start[o + 1] - start[o]
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):

@@ -28,13 +28,13 @@ R0 = 0.1  # metres: keeps the contribution finite when a light sits on the objec
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, parallel=True)
 def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
           cam_pos, cam_basis, cam_tan, cam_focus, thesis_w):
     n = typ.shape[0]
     hot = np.zeros((n, 8))
     lf = np.zeros((n, 8))
-    for j in range(n):
+    for j in nb.prange(n):
         for k in range(3):
             hot[j, k] = position[j, k]
             lf[j, k] = direction[j, k]

@@ -121,7 +121,7 @@ class Scheduler(SceneAPI):
         else:
             g_f, dims = grid_shape(b[:3], b[3:],
                                    CELL_PER_RADIUS * float(np.median(lights.radius[point_rows])))
-        vis_rows, _, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
+        vis_rows, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
                                                      g_f, dims)
         vis_box, vis_box32, vis_geo, vis_mask, big_pos, ext = visible_objects(
             objs.bounds_min, objs.bounds_max, objs.mask, vis_rows, g_f)
