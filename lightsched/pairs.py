@@ -10,15 +10,16 @@ The work is light-major, in four kernels:
    centre (a counting sort), with compact float32 boxes; objects larger than a cell go to a
    short list every light tests.
 2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
-   the centre of an object it reaches (its bounding cube widened by the largest object
-   half-extent), each column one contiguous run of objects; a conservative float32
+   the centre of an object it reaches (its sphere widened by the largest object
+   half-extent, cut column by column), each column one contiguous run of objects; a conservative float32
    sphere-box test filters, then the exact float64 Affects test and P (priority.py). Each
    light writes its own segment of the pair buffers, sized beforehand by ``light_bounds``,
    so the result does not depend on the thread count. The light is fixed in the inner
    loop: its type and data stay in registers, and the objects it meets are neighbours in
    memory.
-3. ``group_pairs``: a counting sort of the pairs by object row (lights in ascending row,
-   that is ascending id, within an object).
+   Lights are walked in grid-cell order (``light_order``) so neighbouring lights share
+   the objects in cache.
+3. ``group_pairs``: a counting sort of the pairs by object row.
 4. ``object_pass`` (parallel over objects in row order): state in, selection, fade, outputs
    out, all sequential in memory.
 A scene small enough for brute force is the same pipeline with a single cell.
@@ -55,6 +56,7 @@ from .select import (
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
+LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 F32_ULP = 2.0**-23           # float32 rounding is at most half of this, relative
 
 
@@ -113,6 +115,31 @@ def _counting_sort(key, ncell):
     return vis_rows, cell_start
 
 
+@nb.njit(cache=True, nogil=True)
+def light_order(hot, rows, g_f, dims):
+    """``rows`` sorted by the grid cell of the light's position (a stable counting sort,
+    lights off the grid first): consecutive lights then walk the same columns of objects
+    while they are in cache. The order of lights within an object's list does not matter
+    (selection breaks ties by id), so this changes nothing but speed."""
+    ncell = dims[0] * dims[1] * dims[2]
+    key = np.empty(rows.shape[0], np.int64)
+    counts = np.zeros(ncell + 2, np.int64)
+    for t in range(rows.shape[0]):
+        j = rows[t]
+        x = _cell(hot[j, 0], g_f[0], g_f[3], dims[0])
+        y = _cell(hot[j, 1], g_f[1], g_f[3], dims[1])
+        z = _cell(hot[j, 2], g_f[2], g_f[3], dims[2])
+        key[t] = (x * dims[1] + y) * dims[2] + z
+        counts[key[t] + 1] += 1
+    for c in range(ncell):
+        counts[c + 1] += counts[c]
+    out = np.empty_like(rows)
+    for t in range(rows.shape[0]):
+        out[counts[key[t]]] = rows[t]
+        counts[key[t]] += 1
+    return out
+
+
 def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.ndarray,
                   dims: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
@@ -125,16 +152,16 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def visible_objects(lo, hi, omask, vis_rows, g_f):
-    """Per visible position (parallel): vis_box [V, 6] float64, vis_box32 [6, V] float32
-    (relative to the grid origin, for the filter; one row per bound so the filter
-    vectorises), vis_geo [V, 5] = (centre, bounding
+    """Per visible position (parallel): vis_box [V, 6] float64, vis_box32 [V, 8] float32
+    (lo, 0, hi, 0 relative to the grid origin, for the filter: 32 bytes, two objects a
+    cache line), vis_geo [V, 5] = (centre, bounding
     radius R = |hi - lo|/2, e2 = |hi - lo|^2), vis_mask [V], big [V] (an object with a
     half-extent over one cell edge: every light tests it directly, and its float32 box is
     +inf so the cell scan never takes it) and the largest half-extent per axis of the
     others, which widens every light's cell range."""
     nv = vis_rows.shape[0]
     vis_box = np.empty((nv, 6))
-    vis_box32 = np.empty((6, nv), np.float32)
+    vis_box32 = np.empty((nv, 8), np.float32)
     vis_geo = np.empty((nv, 5))
     vis_mask = np.empty(nv, np.int64)
     big = np.zeros(nv, np.bool_)
@@ -144,13 +171,15 @@ def visible_objects(lo, hi, omask, vis_rows, g_f):
         for a in range(3):
             vis_box[v, a] = lo[o, a]
             vis_box[v, 3 + a] = hi[o, a]
-            vis_box32[a, v] = np.float32(lo[o, a] - g_f[a])
-            vis_box32[3 + a, v] = np.float32(hi[o, a] - g_f[a])
+            vis_box32[v, a] = np.float32(lo[o, a] - g_f[a])
+            vis_box32[v, 4 + a] = np.float32(hi[o, a] - g_f[a])
             if (hi[o, a] - lo[o, a]) / 2 > cell_edge:
                 big[v] = True
+        vis_box32[v, 3] = 0.0
+        vis_box32[v, 7] = 0.0
         if big[v]:
-            for a in range(6):
-                vis_box32[a, v] = np.inf
+            for a in range(8):
+                vis_box32[v, a] = np.inf
         ex = hi[o, 0] - lo[o, 0]
         ey = hi[o, 1] - lo[o, 1]
         ez = hi[o, 2] - lo[o, 2]
@@ -171,26 +200,50 @@ def visible_objects(lo, hi, omask, vis_rows, g_f):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
+def _axis_cells(p, reach, origin, inv_h, dim):
+    slack = reach * 1e-9 + abs(p) * 1e-15
+    lo = p - reach - slack
+    hi = p + reach + slack
+    miss = hi < origin or lo > origin + dim / inv_h
+    return _cell(lo, origin, inv_h, dim), _cell(hi, origin, inv_h, dim), miss
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
 def _light_cells(hot, j, g_f, dims, ext):
     """The clamped range of the cells that can hold the centre of an object light j
     reaches: its bounding cube widened by the largest object half-extent (and a relative
     1e-9 so rounding never drops a pair); empty (x1 < x0) if that misses the grid."""
+    x0, x1, mx = _axis_cells(hot[j, 0], hot[j, 3] + ext[0], g_f[0], g_f[3], dims[0])
+    y0, y1, my = _axis_cells(hot[j, 1], hot[j, 3] + ext[1], g_f[1], g_f[3], dims[1])
+    z0, z1, mz = _axis_cells(hot[j, 2], hot[j, 3] + ext[2], g_f[2], g_f[3], dims[2])
+    if mx or my or mz:
+        return (1, 0, 0, 0, 0, 0)
+    return (x0, y0, z0, x1, y1, z1)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _column_run(hot, j, x, y, g_f, dims, ext, c):
+    """The cells (z0, z1) of column (x, y) that can hold the centre of an object light j
+    reaches: the light's sphere cut by the column, widened by the largest object
+    half-extent; z1 < z0 when the sphere misses the column. Rounding is absorbed by a
+    relative 1e-9 margin and the clamped border cells reach to infinity."""
+    h = 1.0 / g_f[3]
     r = hot[j, 3]
-    out = np.empty(6, np.int64)
-    for a in range(3):
-        p = hot[j, a]
-        reach = r + ext[a]
-        slack = reach * 1e-9 + abs(p) * 1e-15
-        lo = p - reach - slack
-        hi = p + reach + slack
-        top = g_f[a] + dims[a] / g_f[3]
-        if hi < g_f[a] or lo > top:
-            out[0] = 1
-            out[3] = 0
-            return out
-        out[a] = _cell(lo, g_f[a], g_f[3], dims[a])
-        out[3 + a] = _cell(hi, g_f[a], g_f[3], dims[a])
-    return out
+    big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
+    dd = 0.0
+    for a in range(2):
+        cell = x if a == 0 else y
+        eps = h * 1e-9 + abs(g_f[a]) * 1e-15
+        lo = -np.inf if cell == 0 else g_f[a] + cell * h - eps - ext[a]
+        hi = np.inf if cell == dims[a] - 1 else g_f[a] + (cell + 1) * h + eps + ext[a]
+        d = max(lo - hot[j, a], 0.0, hot[j, a] - hi)
+        dd += d * d
+    if dd > big_r * big_r:
+        return 1, 0
+    zr = math.sqrt(big_r * big_r - dd) * (1.0 + 1e-9) + ext[2]
+    z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[3], dims[2]))
+    z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[3], dims[2]))
+    return z0, z1
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -208,8 +261,10 @@ def light_bounds(hot, rows, grid, n_vis):
         total = big_pos.shape[0]
         for x in range(c[0], c[3] + 1):
             for y in range(c[1], c[4] + 1):
-                base = (x * dims[1] + y) * dims[2]
-                total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
+                z0, z1 = _column_run(hot, j, x, y, g_f, dims, ext, c)
+                if z1 >= z0:
+                    base = (x * dims[1] + y) * dims[2]
+                    total += cell_start[base + z1 + 1] - cell_start[base + z0]
         out[t] = total
     return out
 
@@ -237,94 +292,111 @@ def light_pass(lights, rows, grid, vis, offsets, pair_pos, pair_p, params):
     lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
     big_pos); vis = (vis_box, vis_box32, vis_geo, vis_mask); params = (model, w_obj,
     w_int). Returns count per light."""
-    hot, lf = lights
-    g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_box32, vis_geo, vis_mask = vis
+    g_f, dims = grid[0], grid[1]
     model = int(params[0])
     w_obj = params[1]
     w_int = params[2]
-    n_vis = vis_box.shape[0]
     reach = 0.0
     for a in range(3):
         reach = max(reach, dims[a] / g_f[3])
     count = np.zeros(rows.shape[0], np.int64)
-    for t in nb.prange(rows.shape[0]):
-        j = rows[t]
-        lm = np.int64(hot[j, 4])
-        typ = (np.int64(hot[j, 5]) >> 3) & 3
-        n = offsets[t]
-        if typ == DIRECTIONAL:
-            p = hot[j, 6] + hot[j, 7]
-            for v in range(n_vis):
-                if vis_mask[v] & lm != 0:
-                    pair_pos[n] = v
-                    pair_p[n] = p
-                    n += 1
-            count[t] = n - offsets[t]
-            continue
-        r = hot[j, 3]
-        c = _light_cells(hot, j, g_f, dims, ext)
-        q0 = np.float32(hot[j, 0] - g_f[0])
-        q1 = np.float32(hot[j, 1] - g_f[1])
-        q2 = np.float32(hot[j, 2] - g_f[2])
-        # Coordinates near the grid are at most ``reach`` from its origin; each float32
-        # value is off by at most half an ulp of that, twice per axis plus the subtraction,
-        # so this grown radius can only let the filter pass more pairs, never fewer.
-        far = reach + abs(hot[j, 0] - g_f[0]) + abs(hot[j, 1] - g_f[1]) + abs(hot[j, 2] - g_f[2])
-        r32 = np.float32((r + 4.0 * F32_ULP * far * math.sqrt(3.0)) * (1.0 + 1e-5))
-        rr32 = r32 * r32
-        zero = np.float32(0.0)
-        keep = np.empty(256, np.uint8)
-        for x in range(c[0], c[3] + 1):
-            for y in range(c[1], c[4] + 1):
-                base = (x * dims[1] + y) * dims[2]
-                # The objects centred in a column of cells are one run of positions;
-                # the filter runs branch-free over the run (it vectorises), then the
-                # exact test visits the survivors.
-                v0 = cell_start[base + c[2]]
-                v1 = cell_start[base + c[5] + 1]
-                if v1 - v0 > keep.shape[0]:
-                    keep = np.empty(2 * (v1 - v0), np.uint8)
-                for v in range(v0, v1):
-                    dx = max(max(vis_box32[0, v] - q0, q0 - vis_box32[3, v]), zero)
-                    dy = max(max(vis_box32[1, v] - q1, q1 - vis_box32[4, v]), zero)
-                    dz = max(max(vis_box32[2, v] - q2, q2 - vis_box32[5, v]), zero)
-                    keep[v - v0] = np.uint8(dx * dx + dy * dy + dz * dz <= rr32)
-                for v in range(v0, v1):
-                    if keep[v - v0] == 0:
-                        continue
-                    if vis_mask[v] & lm == 0:
-                        continue
-                    d2 = box_d2(vis_box[v], hot[j, 0], hot[j, 1], hot[j, 2])
-                    if not d2 <= r * r:
-                        continue
-                    hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
-                    if hit:
-                        pair_pos[n] = v
-                        pair_p[n] = p
-                        n += 1
-        for b in range(big_pos.shape[0]):
-            v = big_pos[b]
-            if vis_mask[v] & lm == 0:
-                continue
-            d2 = box_d2(vis_box[v], hot[j, 0], hot[j, 1], hot[j, 2])
-            if not d2 <= r * r:
-                continue
-            hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
-            if hit:
+    n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
+    for ch in nb.prange(n_chunks):
+        keep = np.empty(256, np.int32)
+        for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
+            keep = _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count,
+                              keep, model, w_obj, w_int, reach)
+    return count
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, keep, model,
+               w_obj, w_int, reach):
+    """Light rows[t]'s pairs into its segment of pair_pos / pair_p (see light_pass);
+    returns the (possibly regrown) filter scratch."""
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    vis_box, vis_box32, vis_geo, vis_mask = vis
+    n_vis = vis_box.shape[0]
+    j = rows[t]
+    lm = np.int64(hot[j, 4])
+    typ = (np.int64(hot[j, 5]) >> 3) & 3
+    n = offsets[t]
+    if typ == DIRECTIONAL:
+        p = hot[j, 6] + hot[j, 7]
+        for v in range(n_vis):
+            if vis_mask[v] & lm != 0:
                 pair_pos[n] = v
                 pair_p[n] = p
                 n += 1
         count[t] = n - offsets[t]
-    return count
+        return keep
+    r = hot[j, 3]
+    c = _light_cells(hot, j, g_f, dims, ext)
+    q0 = np.float32(hot[j, 0] - g_f[0])
+    q1 = np.float32(hot[j, 1] - g_f[1])
+    q2 = np.float32(hot[j, 2] - g_f[2])
+    # Coordinates near the grid are at most ``reach`` from its origin; each float32
+    # value is off by at most half an ulp of that, twice per axis plus the subtraction,
+    # so this grown radius can only let the filter pass more pairs, never fewer.
+    far = reach + abs(hot[j, 0] - g_f[0]) + abs(hot[j, 1] - g_f[1]) + abs(hot[j, 2] - g_f[2])
+    r32 = np.float32((r + 4.0 * F32_ULP * far * math.sqrt(3.0)) * (1.0 + 1e-5))
+    rr32 = r32 * r32
+    zero = np.float32(0.0)
+    for x in range(c[0], c[3] + 1):
+        for y in range(c[1], c[4] + 1):
+            z0, z1 = _column_run(hot, j, x, y, g_f, dims, ext, c)
+            if z1 < z0:
+                continue
+            base = (x * dims[1] + y) * dims[2]
+            # The objects centred in a column of cells are one run of positions. The
+            # filter compacts the survivors without branching (a filter that fails at
+            # random would mispredict), then the exact test visits only them.
+            v0 = cell_start[base + z0]
+            v1 = cell_start[base + z1 + 1]
+            if v1 - v0 > keep.shape[0]:
+                keep = np.empty(2 * (v1 - v0), np.int32)
+            m = 0
+            for v in range(v0, v1):
+                dx = max(max(vis_box32[v, 0] - q0, q0 - vis_box32[v, 4]), zero)
+                dy = max(max(vis_box32[v, 1] - q1, q1 - vis_box32[v, 5]), zero)
+                dz = max(max(vis_box32[v, 2] - q2, q2 - vis_box32[v, 6]), zero)
+                keep[m] = v
+                m += dx * dx + dy * dy + dz * dz <= rr32
+            for i in range(m):
+                v = keep[i]
+                if vis_mask[v] & lm == 0:
+                    continue
+                d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
+                if not d2 <= r * r:
+                    continue
+                hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+                if hit:
+                    pair_pos[n] = v
+                    pair_p[n] = p
+                    n += 1
+    for b in range(big_pos.shape[0]):
+        v = big_pos[b]
+        if vis_mask[v] & lm == 0:
+            continue
+        d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
+        if not d2 <= r * r:
+            continue
+        hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+        if hit:
+            pair_pos[n] = v
+            pair_p[n] = p
+            n += 1
+    count[t] = n - offsets[t]
+    return keep
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
-    its own histogram (parallel); within an object the runs follow each other, so its
-    lights stay in ascending row order whatever the thread count. Returns (start [N+1],
+    its own histogram (parallel); within an object the runs follow each other, so the
+    order of its lights is the order of ``rows`` whatever the thread count. Returns (start [N+1],
     obj_pairs [H, 2] = (P, light row) per pair: one record, one cache line touched per
     scattered pair)."""
     n_l = rows.shape[0]

@@ -98,11 +98,12 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def box_d2(box, p0, p1, p2):
-    """Squared distance from p to the box: delta_k = max(lo_k - p_k, 0, p_k - hi_k)."""
-    dx = max(box[0] - p0, 0.0, p0 - box[3])
-    dy = max(box[1] - p1, 0.0, p1 - box[4])
-    dz = max(box[2] - p2, 0.0, p2 - box[5])
+def box_d2(boxes, i, p0, p1, p2):
+    """Squared distance from p to box i of boxes [n, 6] (lo, hi): delta_k = max(lo_k - p_k,
+    0, p_k - hi_k), d2 = dx*dx + dy*dy + dz*dz."""
+    dx = max(boxes[i, 0] - p0, 0.0, p0 - boxes[i, 3])
+    dy = max(boxes[i, 1] - p1, 0.0, p1 - boxes[i, 4])
+    dz = max(boxes[i, 2] - p2, 0.0, p2 - boxes[i, 5])
     return dx * dx + dy * dy + dz * dz
 
 

@@ -23,6 +23,7 @@ from .pairs import (
     grid_shape,
     group_pairs,
     light_bounds,
+    light_order,
     light_pass,
     object_pass,
     visible_objects,
@@ -133,6 +134,7 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "grid", t)
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
+        rows = light_order(hot, rows, g_f, dims)
         bounds = light_bounds(hot, rows, grid, n_vis)
         offsets = np.zeros(rows.size + 1, np.int64)
         np.cumsum(bounds, out=offsets[1:])
