@@ -151,19 +151,16 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def visible_objects(lo, hi, omask, vis_rows, g_f):
-    """Per visible position (parallel): vis_box [V, 6] float64, vis_box32 [V, 8] float32
-    (lo, 0, hi, 0 relative to the grid origin, for the filter: 32 bytes, two objects a
-    cache line), vis_geo [V, 5] = (centre, bounding
-    radius R = |hi - lo|/2, e2 = |hi - lo|^2), vis_mask [V], big [V] (an object with a
-    half-extent over one cell edge: every light tests it directly, and its float32 box is
-    +inf so the cell scan never takes it) and the largest half-extent per axis of the
-    others, which widens every light's cell range."""
+def visible_objects(lo, hi, omask, vis_rows, g_f, out):
+    """Per visible position (parallel), written into out = (vis_box [V, 8] float64,
+    vis_box32 [V, 8] float32) (reused buffers): (lo, hi, mask, e2 = |hi - lo|^2), one
+    cache line for the exact test; the box relative to the grid origin as (lo, 0, hi, 0)
+    in float32 for the filter (32 bytes, two objects a cache line). Returns (big_pos,
+    ext): the objects with a half-extent over one cell edge, which every light tests
+    directly (their float32 box is +inf so the cell scan never takes them), and the
+    largest half-extent per axis of the others, which widens every light's cell range."""
     nv = vis_rows.shape[0]
-    vis_box = np.empty((nv, 6))
-    vis_box32 = np.empty((nv, 8), np.float32)
-    vis_geo = np.empty((nv, 5))
-    vis_mask = np.empty(nv, np.int64)
+    vis_box, vis_box32 = out
     big = np.zeros(nv, np.bool_)
     cell_edge = 1.0 / g_f[3]
     for v in nb.prange(nv):
@@ -183,20 +180,15 @@ def visible_objects(lo, hi, omask, vis_rows, g_f):
         ex = hi[o, 0] - lo[o, 0]
         ey = hi[o, 1] - lo[o, 1]
         ez = hi[o, 2] - lo[o, 2]
-        e2 = ex * ex + ey * ey + ez * ez
-        vis_geo[v, 0] = (lo[o, 0] + hi[o, 0]) / 2
-        vis_geo[v, 1] = (lo[o, 1] + hi[o, 1]) / 2
-        vis_geo[v, 2] = (lo[o, 2] + hi[o, 2]) / 2
-        vis_geo[v, 3] = math.sqrt(e2) / 2
-        vis_geo[v, 4] = e2
-        vis_mask[v] = omask[o]
+        vis_box[v, 6] = omask[o]
+        vis_box[v, 7] = ex * ex + ey * ey + ez * ez
     ext = np.zeros(3)
     for v in range(nv):
         if not big[v]:
             for a in range(3):
                 ext[a] = max(ext[a], (vis_box[v, 3 + a] - vis_box[v, a]) / 2)
     big_pos = np.flatnonzero(big).astype(np.int32)
-    return vis_box, vis_box32, vis_geo, vis_mask, big_pos, ext
+    return big_pos, ext
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -270,18 +262,23 @@ def light_bounds(hot, rows, grid, n_vis):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int):
+def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
     """(affects, P) of light j and visible object v once d2 <= r*r holds: the spot cone and
-    the model's P (priority.py holds the rules)."""
-    geo = (vis_geo[v, 0], vis_geo[v, 1], vis_geo[v, 2], vis_geo[v, 3], vis_geo[v, 4])
-    s = 1.0
-    if typ == SPOT:
-        meets, s = spot_cone(hot, lf, j, geo, model == MODEL_CONTRIBUTION)
-        if not meets:
-            return False, 0.0
-    if model == MODEL_CONTRIBUTION:
-        return True, falloff(hot[j, 6], hot[j, 3], d2, geo[4]) * s + hot[j, 7]
-    return True, thesis(hot, lf, j, geo, w_obj, w_int)
+    the model's P (priority.py holds the rules). The bounding sphere (centre (lo + hi)/2,
+    R = |hi - lo|/2) is only built when a rule needs it."""
+    e2 = vis_box[v, 7]
+    if typ == SPOT or model != MODEL_CONTRIBUTION:
+        geo = ((vis_box[v, 0] + vis_box[v, 3]) / 2, (vis_box[v, 1] + vis_box[v, 4]) / 2,
+               (vis_box[v, 2] + vis_box[v, 5]) / 2, math.sqrt(e2) / 2, e2)
+        s = 1.0
+        if typ == SPOT:
+            meets, s = spot_cone(hot, lf, j, geo, model == MODEL_CONTRIBUTION)
+            if not meets:
+                return False, 0.0
+        if model != MODEL_CONTRIBUTION:
+            return True, thesis(hot, lf, j, geo, w_obj, w_int)
+        return True, falloff(hot[j, 6], hot[j, 3], d2, e2) * s + hot[j, 7]
+    return True, falloff(hot[j, 6], hot[j, 3], d2, e2) + hot[j, 7]
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -290,7 +287,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_pos, pair_p, params):
     pair_pos / pair_p [offsets[t] : offsets[t] + count[t]] = (visible position, P).
 
     lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
-    big_pos); vis = (vis_box, vis_box32, vis_geo, vis_mask); params = (model, w_obj,
+    big_pos); vis = (vis_box, vis_box32); params = (model, w_obj,
     w_int). Returns count per light."""
     g_f, dims = grid[0], grid[1]
     model = int(params[0])
@@ -316,7 +313,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
     returns the (possibly regrown) filter scratch."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_box32, vis_geo, vis_mask = vis
+    vis_box, vis_box32 = vis
     n_vis = vis_box.shape[0]
     j = rows[t]
     lm = np.int64(hot[j, 4])
@@ -325,7 +322,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
     if typ == DIRECTIONAL:
         p = hot[j, 6] + hot[j, 7]
         for v in range(n_vis):
-            if vis_mask[v] & lm != 0:
+            if np.int64(vis_box[v, 6]) & lm != 0:
                 pair_pos[n] = v
                 pair_p[n] = p
                 n += 1
@@ -365,24 +362,24 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
                 m += dx * dx + dy * dy + dz * dz <= rr32
             for i in range(m):
                 v = keep[i]
-                if vis_mask[v] & lm == 0:
+                if np.int64(vis_box[v, 6]) & lm == 0:
                     continue
                 d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
                 if not d2 <= r * r:
                     continue
-                hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+                hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
                 if hit:
                     pair_pos[n] = v
                     pair_p[n] = p
                     n += 1
     for b in range(big_pos.shape[0]):
         v = big_pos[b]
-        if vis_mask[v] & lm == 0:
+        if np.int64(vis_box[v, 6]) & lm == 0:
             continue
         d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
         if not d2 <= r * r:
             continue
-        hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_geo, model, w_obj, w_int)
+        hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
         if hit:
             pair_pos[n] = v
             pair_p[n] = p

@@ -124,8 +124,11 @@ class Scheduler(SceneAPI):
                                    CELL_PER_RADIUS * float(np.median(lights.radius[point_rows])))
         vis_rows, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
                                                      g_f, dims)
-        vis_box, vis_box32, vis_geo, vis_mask, big_pos, ext = visible_objects(
-            objs.bounds_min, objs.bounds_max, objs.mask, vis_rows, g_f)
+        nv = vis_rows.size
+        vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8),
+               self._scratch("vis_box32", nv * 8, np.float32)[:nv * 8].reshape(nv, 8))
+        big_pos, ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, vis_rows,
+                                       g_f, vis)
         grid = (g_f, dims, cell_start, ext, big_pos)
         if "pairs" not in plan:
             plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
@@ -140,7 +143,7 @@ class Scheduler(SceneAPI):
         np.cumsum(bounds, out=offsets[1:])
         pair_pos = self._scratch("pair_pos", int(offsets[-1]), np.int32)
         pair_p = self._scratch("pair_p", int(offsets[-1]), np.float64)
-        count = light_pass((hot, lf), rows, grid, (vis_box, vis_box32, vis_geo, vis_mask), offsets,
+        count = light_pass((hot, lf), rows, grid, vis, offsets,
                            pair_pos, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
         t = _lap(seconds, "pairs", t)
         lists = group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, len(objs))
