@@ -108,11 +108,13 @@ def _counting_sort(key, ncell):
         counts[c + 1] += counts[c]
     cell_start = counts.copy()
     vis_rows = np.empty(counts[ncell], np.int64)
+    pos_of = np.full(key.shape[0], -1, np.int64)
     for o in range(key.shape[0]):
         if key[o] >= 0:
             vis_rows[counts[key[o]]] = o
+            pos_of[o] = counts[key[o]]
             counts[key[o]] += 1
-    return vis_rows, cell_start
+    return vis_rows, pos_of, cell_start
 
 
 @nb.njit(cache=True, nogil=True)
@@ -141,17 +143,17 @@ def light_order(hot, rows, g_f, dims):
 
 
 def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.ndarray,
-                  dims: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                  dims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
-    in space become neighbours in memory). Returns (vis_rows int64[V], cell_start
-    int64[ncell+1]): the objects centred in cell c are positions cell_start[c] ..
-    cell_start[c+1]-1, so a column of cells is one run."""
+    in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N]
+    (-1 if invisible), cell_start int64[ncell+1]): the objects centred in cell c are
+    positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run."""
     key = _centre_cells(lo, hi, visible, g_f, dims)
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def visible_objects(lo, hi, omask, vis_rows, g_f, out):
+def visible_objects(lo, hi, omask, pos_of, g_f, out):
     """Per visible position (parallel), written into out = (vis_box [V, 8] float64,
     vis_box32 [V, 8] float32) (reused buffers): (lo, hi, mask, e2 = |hi - lo|^2), one
     cache line for the exact test; the box relative to the grid origin as (lo, 0, hi, 0)
@@ -159,34 +161,44 @@ def visible_objects(lo, hi, omask, vis_rows, g_f, out):
     ext): the objects with a half-extent over one cell edge, which every light tests
     directly (their float32 box is +inf so the cell scan never takes them), and the
     largest half-extent per axis of the others, which widens every light's cell range."""
-    nv = vis_rows.shape[0]
     vis_box, vis_box32 = out
+    nv = vis_box.shape[0]
+    n = lo.shape[0]
     big = np.zeros(nv, np.bool_)
     cell_edge = 1.0 / g_f[3]
-    for v in nb.prange(nv):
-        o = vis_rows[v]
-        for a in range(3):
-            vis_box[v, a] = lo[o, a]
-            vis_box[v, 3 + a] = hi[o, a]
-            vis_box32[v, a] = np.float32(lo[o, a] - g_f[a])
-            vis_box32[v, 4 + a] = np.float32(hi[o, a] - g_f[a])
-            if (hi[o, a] - lo[o, a]) / 2 > cell_edge:
-                big[v] = True
-        vis_box32[v, 3] = 0.0
-        vis_box32[v, 7] = 0.0
-        if big[v]:
-            for a in range(8):
-                vis_box32[v, a] = np.inf
-        ex = hi[o, 0] - lo[o, 0]
-        ey = hi[o, 1] - lo[o, 1]
-        ez = hi[o, 2] - lo[o, 2]
-        vis_box[v, 6] = omask[o]
-        vis_box[v, 7] = ex * ex + ey * ey + ez * ez
-    ext = np.zeros(3)
-    for v in range(nv):
-        if not big[v]:
+    n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    chunk_ext = np.zeros((n_chunks, 3))
+    # Rows are read in order and written at their position: scattered stores do not
+    # stall the way scattered loads do. Per-chunk maxima keep the reduction parallel.
+    for ch in nb.prange(n_chunks):
+        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            v = pos_of[o]
+            if v < 0:
+                continue
             for a in range(3):
-                ext[a] = max(ext[a], (vis_box[v, 3 + a] - vis_box[v, a]) / 2)
+                vis_box[v, a] = lo[o, a]
+                vis_box[v, 3 + a] = hi[o, a]
+                vis_box32[v, a] = np.float32(lo[o, a] - g_f[a])
+                vis_box32[v, 4 + a] = np.float32(hi[o, a] - g_f[a])
+                if (hi[o, a] - lo[o, a]) / 2 > cell_edge:
+                    big[v] = True
+            vis_box32[v, 3] = 0.0
+            vis_box32[v, 7] = 0.0
+            if big[v]:
+                for a in range(8):
+                    vis_box32[v, a] = np.inf
+            else:
+                for a in range(3):
+                    chunk_ext[ch, a] = max(chunk_ext[ch, a], (hi[o, a] - lo[o, a]) / 2)
+            ex = hi[o, 0] - lo[o, 0]
+            ey = hi[o, 1] - lo[o, 1]
+            ez = hi[o, 2] - lo[o, 2]
+            vis_box[v, 6] = omask[o]
+            vis_box[v, 7] = ex * ex + ey * ey + ez * ez
+    ext = np.zeros(3)
+    for ch in range(n_chunks):
+        for a in range(3):
+            ext[a] = max(ext[a], chunk_ext[ch, a])
     big_pos = np.flatnonzero(big).astype(np.int32)
     return big_pos, ext
 

@@ -122,19 +122,21 @@ class Scheduler(SceneAPI):
         else:
             g_f, dims = grid_shape(b[:3], b[3:],
                                    CELL_PER_RADIUS * float(np.median(lights.radius[point_rows])))
-        vis_rows, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
-                                                     g_f, dims)
+        t = _lap(seconds, "grid", t)
+        vis_rows, pos_of, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
+                                             g_f, dims)
+        t = _lap(seconds, "order", t)
         nv = vis_rows.size
         vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8),
                self._scratch("vis_box32", nv * 8, np.float32)[:nv * 8].reshape(nv, 8))
-        big_pos, ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, vis_rows,
+        big_pos, ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of,
                                        g_f, vis)
         grid = (g_f, dims, cell_start, ext, big_pos)
         if "pairs" not in plan:
             plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
                              f"{1 / g_f[3]:.3g} m, {big_pos.size} objects larger than a cell "
                              f"tested directly), walked by {rows.size} lights")
-        t = _lap(seconds, "grid", t)
+        t = _lap(seconds, "prep", t)
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
         rows = light_order(hot, rows, g_f, dims)
