@@ -81,10 +81,8 @@ def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
             if si[I_OLD_ROW, m] < 0:
                 continue  # no longer affects: freed at once, it shows nothing anyway
             chosen = -1
-            for t in range(nsel):
-                if si[I_ID, t] == lid:
-                    chosen = t
-                    break
+            for t in range(nsel):  # compares only: it vectorises, a break would not
+                chosen = t if si[I_ID, t] == lid else chosen
             w = sf[F_OLD_W, m]
             st = si[I_OLD_ST, m]
             if chosen >= 0:

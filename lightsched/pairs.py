@@ -442,13 +442,16 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
     and this frame's P / row for the object's old slot of that light. Returns nbest.
     (Fuses select.hysteresis_key with the old-slot lookup: one loop over K.)"""
     lid = np.int64(ids[j])
-    key = p
+    # Compares only inside the loop (it vectorises); the one store happens after it.
+    was = False
+    slot = -1
     for m in range(sf.shape[1]):
-        if si[I_PREV_SEL, m] == lid:
-            key = p + h * abs(p) + h_abs
-        if si[I_OLD_ID, m] == lid:
-            sf[F_OLD_P, m] = p
-            si[I_OLD_ROW, m] = j
+        was |= si[I_PREV_SEL, m] == lid
+        slot = m if si[I_OLD_ID, m] == lid else slot
+    if slot >= 0:
+        sf[F_OLD_P, slot] = p
+        si[I_OLD_ROW, slot] = j
+    key = p + h * abs(p) + h_abs if was else p
     return topk_insert(sf, si, nbest, key, lid, p, j)
 
 
