@@ -119,15 +119,35 @@ def box_in_frustum(plane_n, plane_p, cam, lo, hi):
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
-    """visible[o] iff o's AABB is in at least one camera frustum."""
+    """visible[o] iff o's AABB is in at least one camera frustum; also returns the
+    bounding box of the visible objects (lo, hi) [6], +-inf when none is visible, from
+    per-chunk boxes so the reduction stays parallel."""
     n = bounds_min.shape[0]
     out = np.zeros(n, np.bool_)
-    for o in nb.prange(n):
-        for cam in range(plane_n.shape[0]):
-            if box_in_frustum(plane_n, plane_p, cam, bounds_min[o], bounds_max[o]):
-                out[o] = True
-                break
-    return out
+    n_chunks = (n + 1023) // 1024
+    boxes = np.empty((n_chunks, 6))
+    for ch in nb.prange(n_chunks):
+        for a in range(3):
+            boxes[ch, a] = np.inf
+            boxes[ch, 3 + a] = -np.inf
+        for o in range(ch * 1024, min(n, (ch + 1) * 1024)):
+            for cam in range(plane_n.shape[0]):
+                if box_in_frustum(plane_n, plane_p, cam, bounds_min[o], bounds_max[o]):
+                    out[o] = True
+                    break
+            if out[o]:
+                for a in range(3):
+                    boxes[ch, a] = min(boxes[ch, a], bounds_min[o, a])
+                    boxes[ch, 3 + a] = max(boxes[ch, 3 + a], bounds_max[o, a])
+    b = np.empty(6)
+    for a in range(3):
+        b[a] = np.inf
+        b[3 + a] = -np.inf
+    for ch in range(n_chunks):
+        for a in range(3):
+            b[a] = min(b[a], boxes[ch, a])
+            b[3 + a] = max(b[3 + a], boxes[ch, 3 + a])
+    return out, b
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)

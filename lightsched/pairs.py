@@ -252,8 +252,9 @@ def _column_run(hot, j, x, y, g_f, dims, ext, c):
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def light_bounds(hot, rows, grid, n_vis):
-    """Upper bound of the pairs each light in ``rows`` can emit (objects centred in its
-    cells plus the big objects; every visible object for a directional light)."""
+    """Upper bound of the pairs each light in ``rows`` can emit (objects centred in the
+    cells of its widened cube plus the big objects; every visible object for a
+    directional light)."""
     g_f, dims, cell_start, ext, big_pos = grid
     out = np.zeros(rows.shape[0], np.int64)
     for t in nb.prange(rows.shape[0]):
@@ -263,12 +264,11 @@ def light_bounds(hot, rows, grid, n_vis):
             continue
         c = _light_cells(hot, j, g_f, dims, ext)
         total = big_pos.shape[0]
+        # The whole cube, not the sphere cut: a looser bound is cheaper to count.
         for x in range(c[0], c[3] + 1):
             for y in range(c[1], c[4] + 1):
-                z0, z1 = _column_run(hot, j, x, y, g_f, dims, ext, c)
-                if z1 >= z0:
-                    base = (x * dims[1] + y) * dims[2]
-                    total += cell_start[base + z1 + 1] - cell_start[base + z0]
+                base = (x * dims[1] + y) * dims[2]
+                total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
         out[t] = total
     return out
 

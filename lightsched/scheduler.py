@@ -38,19 +38,6 @@ BRUTE_FORCE_PAIRS = 1 << 15
 CELL_PER_RADIUS = 1.0
 
 
-@nb.njit(cache=True, nogil=True)
-def _visible_bounds(lo, hi, visible):
-    b = np.empty(6)
-    b[:3] = np.inf
-    b[3:] = -np.inf
-    for o in range(lo.shape[0]):
-        if visible[o]:
-            for a in range(3):
-                b[a] = min(b[a], lo[o, a])
-                b[3 + a] = max(b[3 + a], hi[o, a])
-    return b
-
-
 _STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
           ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
 
@@ -90,8 +77,8 @@ class Scheduler(SceneAPI):
 
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
                                frames.plane_p)
-        vis_o = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
-                                frames.plane_p)
+        vis_o, b = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
+                                   frames.plane_p)
         t = _lap(seconds, "visibility", t)
 
         hot, lf = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
@@ -110,7 +97,6 @@ class Scheduler(SceneAPI):
         rows = np.flatnonzero(compete).astype(np.int32)
         point_rows = rows[~is_dir[rows]]
         n_vis = int(np.count_nonzero(vis_o))
-        b = _visible_bounds(objs.bounds_min, objs.bounds_max, vis_o)
         if n_vis == 0:
             b = np.zeros(6)
         if rows.size == 0 or n_vis == 0:
