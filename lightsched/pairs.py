@@ -40,6 +40,7 @@ from .select import (
     F_NEW_W,
     F_OLD_P,
     F_OLD_W,
+    F_P,
     F_ROWS,
     I_ID,
     I_NEW_ID,
@@ -49,6 +50,7 @@ from .select import (
     I_OLD_ROW,
     I_OLD_ST,
     I_PREV_SEL,
+    I_ROW,
     I_ROWS,
     topk_insert,
 )
@@ -437,20 +439,27 @@ def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
+def _match_old_slot(p, j, lid, sf, si):
+    """Records this frame's P and row for the object's old slot of light lid, if any.
+    Compares only inside the loop (it vectorises); the one store happens after it."""
+    slot = -1
+    for m in range(sf.shape[1]):
+        slot = m if si[I_OLD_ID, m] == lid else slot
+    if slot >= 0:
+        sf[F_OLD_P, slot] = p
+        si[I_OLD_ROW, slot] = j
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
 def _select(p, j, ids, sf, si, nbest, h, h_abs):
     """Offers light row j with priority p to the object's top K: hysteresis key, insert,
     and this frame's P / row for the object's old slot of that light. Returns nbest.
     (Fuses select.hysteresis_key with the old-slot lookup: one loop over K.)"""
     lid = np.int64(ids[j])
-    # Compares only inside the loop (it vectorises); the one store happens after it.
+    _match_old_slot(p, j, lid, sf, si)
     was = False
-    slot = -1
     for m in range(sf.shape[1]):
         was |= si[I_PREV_SEL, m] == lid
-        slot = m if si[I_OLD_ID, m] == lid else slot
-    if slot >= 0:
-        sf[F_OLD_P, slot] = p
-        si[I_OLD_ROW, slot] = j
     key = p + h * abs(p) + h_abs if was else p
     return topk_insert(sf, si, nbest, key, lid, p, j)
 
@@ -493,10 +502,21 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
                     si[I_OLD_ST, m] = s_st[o, m]
                     si[I_PREV_SEL, m] = s_sel[o, m]
                     si[I_OLD_ROW, m] = -1
-                for t in range(start[o], start[o + 1]):
-                    nbest = _select(obj_pairs[t, 0], np.int64(obj_pairs[t, 1]), ids, sf, si,
-                                    nbest, h, h_abs)
                 cand = start[o + 1] - start[o]
+                if cand <= k:
+                    # Every competing light is selected: no keys, no ranking to keep.
+                    for t in range(cand):
+                        j = np.int64(obj_pairs[start[o] + t, 1])
+                        _match_old_slot(obj_pairs[start[o] + t, 0], j, np.int64(ids[j]),
+                                        sf, si)
+                        sf[F_P, t] = obj_pairs[start[o] + t, 0]
+                        si[I_ID, t] = ids[j]
+                        si[I_ROW, t] = j
+                    nbest = cand
+                else:
+                    for t in range(start[o], start[o + 1]):
+                        nbest = _select(obj_pairs[t, 0], np.int64(obj_pairs[t, 1]), ids, sf,
+                                        si, nbest, h, h_abs)
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):
                 if m < cnt:
