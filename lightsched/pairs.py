@@ -296,12 +296,12 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def light_pass(lights, rows, grid, vis, offsets, pair_pos, pair_p, params):
+def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     """For each light in ``rows`` (parallel), its affecting pairs with visible objects:
-    pair_pos / pair_p [offsets[t] : offsets[t] + count[t]] = (visible position, P).
+    pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
 
     lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
-    big_pos); vis = (vis_box, vis_box32); params = (model, w_obj,
+    big_pos); vis = (vis_box, vis_box32, vis_rows); params = (model, w_obj,
     w_int). Returns count per light."""
     g_f, dims = grid[0], grid[1]
     model = int(params[0])
@@ -315,19 +315,19 @@ def light_pass(lights, rows, grid, vis, offsets, pair_pos, pair_p, params):
     for ch in nb.prange(n_chunks):
         keep = np.empty(256, np.int32)
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
-            keep = _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count,
+            keep = _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count,
                               keep, model, w_obj, w_int, reach)
     return count
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, keep, model,
+def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, keep, model,
                w_obj, w_int, reach):
-    """Light rows[t]'s pairs into its segment of pair_pos / pair_p (see light_pass);
+    """Light rows[t]'s pairs into its segment of pair_obj / pair_p (see light_pass);
     returns the (possibly regrown) filter scratch."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_box32 = vis
+    vis_box, vis_box32, vis_rows = vis
     n_vis = vis_box.shape[0]
     j = rows[t]
     lm = np.int64(hot[j, 4])
@@ -337,7 +337,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
         p = hot[j, 6] + hot[j, 7]
         for v in range(n_vis):
             if np.int64(vis_box[v, 6]) & lm != 0:
-                pair_pos[n] = v
+                pair_obj[n] = vis_rows[v]
                 pair_p[n] = p
                 n += 1
         count[t] = n - offsets[t]
@@ -383,7 +383,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
                     continue
                 hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
                 if hit:
-                    pair_pos[n] = v
+                    pair_obj[n] = vis_rows[v]
                     pair_p[n] = p
                     n += 1
     for b in range(big_pos.shape[0]):
@@ -395,7 +395,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
             continue
         hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
         if hit:
-            pair_pos[n] = v
+            pair_obj[n] = vis_rows[v]
             pair_p[n] = p
             n += 1
     count[t] = n - offsets[t]
@@ -403,7 +403,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_pos, pair_p, count, kee
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
+def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
     its own histogram (parallel); within an object the runs follow each other, so the
@@ -415,7 +415,7 @@ def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
     for q in nb.prange(GROUP_PARTS):
         for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
             for e in range(offsets[t], offsets[t] + count[t]):
-                hist[q, vis_rows[pair_pos[e]]] += 1
+                hist[q, pair_obj[e]] += 1
     start = np.empty(n_obj + 1, np.int64)
     run = 0
     for o in range(n_obj):
@@ -430,7 +430,7 @@ def group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, n_obj):
         for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
             j = rows[t]
             for e in range(offsets[t], offsets[t] + count[t]):
-                o = vis_rows[pair_pos[e]]
+                o = pair_obj[e]
                 d = hist[q, o]
                 obj_pairs[d, 0] = pair_p[e]
                 obj_pairs[d, 1] = j

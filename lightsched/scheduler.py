@@ -114,9 +114,10 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "order", t)
         nv = vis_rows.size
         vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8),
-               self._scratch("vis_box32", nv * 8, np.float32)[:nv * 8].reshape(nv, 8))
+               self._scratch("vis_box32", nv * 8, np.float32)[:nv * 8].reshape(nv, 8),
+               vis_rows)
         big_pos, ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of,
-                                       g_f, vis)
+                                       g_f, vis[:2])
         grid = (g_f, dims, cell_start, ext, big_pos)
         if "pairs" not in plan:
             plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
@@ -129,12 +130,12 @@ class Scheduler(SceneAPI):
         bounds = light_bounds(hot, rows, grid, n_vis)
         offsets = np.zeros(rows.size + 1, np.int64)
         np.cumsum(bounds, out=offsets[1:])
-        pair_pos = self._scratch("pair_pos", int(offsets[-1]), np.int32)
+        pair_obj = self._scratch("pair_obj", int(offsets[-1]), np.int32)
         pair_p = self._scratch("pair_p", int(offsets[-1]), np.float64)
         count = light_pass((hot, lf), rows, grid, vis, offsets,
-                           pair_pos, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
+                           pair_obj, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
         t = _lap(seconds, "pairs", t)
-        lists = group_pairs(rows, offsets, count, pair_pos, pair_p, vis_rows, len(objs))
+        lists = group_pairs(rows, offsets, count, pair_obj, pair_p, len(objs))
         t = _lap(seconds, "group", t)
 
         reset = objs.is_new | ~objs.get("was_visible")
