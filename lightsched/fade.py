@@ -35,7 +35,7 @@ from .select import (
 ONE_EPS = 1e-6  # DESIGN: within 1e-6 of 1 is 1, a fading-out weight within 1e-6 of 0 is 0
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _slot_before(st_a, p_a, w_a, id_a, st_b, p_b, w_b, id_b):
     """Output order: not fading out by P desc, then fading out by weight desc; ties lower id."""
     out_a = st_a == FADING_OUT
@@ -47,7 +47,7 @@ def _slot_before(st_a, p_a, w_a, id_a, st_b, p_b, w_b, id_b):
     return ranks_before(p_a, id_a, p_b, id_b)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _put(sf, si, cnt, lid, w, st, p, row):
     si[I_NEW_ID, cnt] = lid
     sf[F_NEW_W, cnt] = w
@@ -56,7 +56,7 @@ def _put(sf, si, cnt, lid, w, st, p, row):
     si[I_NEW_ROW, cnt] = row
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
     """Selected set in rows (I_ID, F_P, I_ROW)[:nsel]; last frame's slots in (I_OLD_ID,
     F_OLD_W, I_OLD_ST) with this frame's (F_OLD_P, I_OLD_ROW); writes the new slots to

@@ -90,13 +90,13 @@ def cascade_splits(cameras: list[Camera], cascades: int, shadow_distance: float)
     return out
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def signed_distance(n: np.ndarray, q: np.ndarray, x0: float, x1: float, x2: float) -> float:
     """n . (x - q), summed in x, y, z order (DESIGN "Tests")."""
     return n[0] * (x0 - q[0]) + n[1] * (x1 - q[1]) + n[2] * (x2 - q[2])
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ball_in_frustum(plane_n, plane_p, cam, x0, x1, x2, radius):
     for j in range(6):
         if signed_distance(plane_n[cam, j], plane_p[cam, j], x0, x1, x2) < -radius:
@@ -104,7 +104,7 @@ def ball_in_frustum(plane_n, plane_p, cam, x0, x1, x2, radius):
     return True
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def box_in_frustum(plane_n, plane_p, cam, lo, hi):
     """The conservative AABB test: the corner farthest along n has distance >= 0."""
     for j in range(6):
@@ -117,7 +117,7 @@ def box_in_frustum(plane_n, plane_p, cam, lo, hi):
     return True
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
     """visible[o] iff o's AABB is in at least one camera frustum; also returns the
     bounding box of the visible objects (lo, hi) [6], +-inf when none is visible, from
@@ -150,7 +150,7 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
     return out, b
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def lights_visible(light_type, position, radius, plane_n, plane_p):
     """Point/spot: the ball (position, r) is in some frustum; directional: always."""
     n = light_type.shape[0]

@@ -62,7 +62,7 @@ LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 F32_ULP = 2.0**-23           # float32 rounding is at most half of this, relative
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _cell(x, origin, inv_h, dim):
     v = (x - origin) * inv_h
     if not v > 0.0:
@@ -85,7 +85,7 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
     return np.append(lo.astype(np.float64), 1.0 / h), dims
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _centre_cells(lo, hi, visible, g_f, dims):
     n = lo.shape[0]
     key = np.empty(n, np.int64)
@@ -100,7 +100,7 @@ def _centre_cells(lo, hi, visible, g_f, dims):
     return key
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _counting_sort(key, ncell):
     counts = np.zeros(ncell + 1, np.int64)
     for o in range(key.shape[0]):
@@ -119,7 +119,7 @@ def _counting_sort(key, ncell):
     return vis_rows, pos_of, cell_start
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def light_order(hot, rows, g_f, dims):
     """``rows`` sorted by the grid cell of the light's position (a stable counting sort,
     lights off the grid first): consecutive lights then walk the same columns of objects
@@ -154,7 +154,7 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def visible_objects(lo, hi, omask, pos_of, g_f, out):
     """Per visible position (parallel), written into out = (vis_box [V, 8] float64,
     vis_box32 [V, 8] float32) (reused buffers): (lo, hi, mask, e2 = |hi - lo|^2), one
@@ -205,7 +205,7 @@ def visible_objects(lo, hi, omask, pos_of, g_f, out):
     return big_pos, ext
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _axis_cells(p, reach, origin, inv_h, dim):
     slack = reach * 1e-9 + abs(p) * 1e-15
     lo = p - reach - slack
@@ -214,7 +214,7 @@ def _axis_cells(p, reach, origin, inv_h, dim):
     return _cell(lo, origin, inv_h, dim), _cell(hi, origin, inv_h, dim), miss
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _light_cells(hot, j, g_f, dims, ext):
     """The clamped range of the cells that can hold the centre of an object light j
     reaches: its bounding cube widened by the largest object half-extent (and a relative
@@ -227,32 +227,19 @@ def _light_cells(hot, j, g_f, dims, ext):
     return (x0, y0, z0, x1, y1, z1)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
-def _column_run(hot, j, x, y, g_f, dims, ext, c):
-    """The cells (z0, z1) of column (x, y) that can hold the centre of an object light j
-    reaches: the light's sphere cut by the column, widened by the largest object
-    half-extent; z1 < z0 when the sphere misses the column. Rounding is absorbed by a
-    relative 1e-9 margin and the clamped border cells reach to infinity."""
-    h = 1.0 / g_f[3]
-    r = hot[j, 3]
-    big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
-    dd = 0.0
-    for a in range(2):
-        cell = x if a == 0 else y
-        eps = h * 1e-9 + abs(g_f[a]) * 1e-15
-        lo = -np.inf if cell == 0 else g_f[a] + cell * h - eps - ext[a]
-        hi = np.inf if cell == dims[a] - 1 else g_f[a] + (cell + 1) * h + eps + ext[a]
-        d = max(lo - hot[j, a], 0.0, hot[j, a] - hi)
-        dd += d * d
-    if dd > big_r * big_r:
-        return 1, 0
-    zr = math.sqrt(big_r * big_r - dd) * (1.0 + 1e-9) + ext[2]
-    z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[3], dims[2]))
-    z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[3], dims[2]))
-    return z0, z1
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _slab_d2(p, cell, origin, h, dim, ext_a):
+    """Squared distance along one axis from p to the centres' slab of a cell row, widened
+    by the largest object half-extent; the clamped border cells reach to infinity and a
+    relative 1e-9 margin absorbs rounding."""
+    eps = h * 1e-9 + abs(origin) * 1e-15
+    lo = -np.inf if cell == 0 else origin + cell * h - eps - ext_a
+    hi = np.inf if cell == dim - 1 else origin + (cell + 1) * h + eps + ext_a
+    d = max(lo - p, 0.0, p - hi)
+    return d * d
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def light_bounds(hot, rows, grid, n_vis):
     """Upper bound of the pairs each light in ``rows`` can emit (objects centred in the
     cells of its widened cube plus the big objects; every visible object for a
@@ -275,7 +262,7 @@ def light_bounds(hot, rows, grid, n_vis):
     return out
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
     """(affects, P) of light j and visible object v once d2 <= r*r holds: the spot cone and
     the model's P (priority.py holds the rules). The bounding sphere (centre (lo + hi)/2,
@@ -295,7 +282,7 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
     return True, falloff(hot[j, 6], hot[j, 3], d2, e2) + hot[j, 7]
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     """For each light in ``rows`` (parallel), its affecting pairs with visible objects:
     pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
@@ -320,7 +307,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     return count
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, keep, model,
                w_obj, w_int, reach):
     """Light rows[t]'s pairs into its segment of pair_obj / pair_p (see light_pass);
@@ -354,9 +341,22 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     r32 = np.float32((r + 4.0 * F32_ULP * far * math.sqrt(3.0)) * (1.0 + 1e-5))
     rr32 = r32 * r32
     zero = np.float32(0.0)
+    # Cut the cube to the sphere column by column: a column whose slab the (widened)
+    # sphere misses is skipped, and a run is trimmed to the sphere's chord.
+    h = 1.0 / g_f[3]
+    big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
+    rr = big_r * big_r
     for x in range(c[0], c[3] + 1):
+        dxx = _slab_d2(hot[j, 0], x, g_f[0], h, dims[0], ext[0])
+        if dxx > rr:
+            continue
         for y in range(c[1], c[4] + 1):
-            z0, z1 = _column_run(hot, j, x, y, g_f, dims, ext, c)
+            dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], h, dims[1], ext[1])
+            if dd > rr:
+                continue
+            zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
+            z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[3], dims[2]))
+            z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[3], dims[2]))
             if z1 < z0:
                 continue
             base = (x * dims[1] + y) * dims[2]
@@ -402,7 +402,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     return keep
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
@@ -438,7 +438,7 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
     return start, obj_pairs
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _match_old_slot(p, j, lid, sf, si):
     """Records this frame's P and row for the object's old slot of light lid, if any.
     Compares only inside the loop (it vectorises); the one store happens after it."""
@@ -450,7 +450,7 @@ def _match_old_slot(p, j, lid, sf, si):
         si[I_OLD_ROW, slot] = j
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _select(p, j, ids, sf, si, nbest, h, h_abs):
     """Offers light row j with priority p to the object's top K: hysteresis key, insert,
     and this frame's P / row for the object's old slot of that light. Returns nbest.
@@ -464,7 +464,7 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
     return topk_insert(sf, si, nbest, key, lid, p, j)
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def object_pass(objs, lists, ids, state_in, state_out, out, params):
     """For every object (parallel, rows in order): top-K with hysteresis, fade, outputs.
 

@@ -28,7 +28,7 @@ R0 = 0.1  # metres: keeps the contribution finite when a light sits on the objec
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
           cam_pos, cam_basis, cam_tan, cam_focus, thesis_w):
     n = typ.shape[0]
@@ -68,7 +68,7 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
                  frames.focus, np.array([w_ecc, w_dist, c1]))
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
     """w_ecc f + w_dist d_viewer for one camera (Eriksson eq. 3.1, Berka's eccentricity).
 
@@ -97,7 +97,7 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
     return w_ecc * f + w_dist * d_viewer
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def box_d2(boxes, i, p0, p1, p2):
     """Squared distance from p to box i of boxes [n, 6] (lo, hi): delta_k = max(lo_k - p_k,
     0, p_k - hi_k), d2 = dx*dx + dy*dy + dz*dz."""
@@ -107,7 +107,7 @@ def box_d2(boxes, i, p0, p1, p2):
     return dx * dx + dy * dy + dz * dz
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def falloff(i, r, d2, e2):
     """i*w*w*g/(d2 + r0*r0) of the contribution model: q = d2/(r*r), w = max(0, 1 - q*q),
     g = min(1, 4 r*r / e2) (1 for e2 = 0). P = falloff * s + p_user."""
@@ -117,7 +117,7 @@ def falloff(i, r, d2, e2):
     return i * w * w * g / (d2 + R0 * R0)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def spot_cone(hot, lf, j, geo, contribution):
     """(meets, s) of spot row j and the object's bounding sphere geo = (c0, c1, c2, R, e2):
     the one-nappe cone test, and the spot factor s of the contribution model (1 when not
@@ -144,7 +144,7 @@ def spot_cone(hot, lf, j, geo, contribution):
     return True, t * t
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def thesis(hot, lf, j, geo, w_obj, w_int):
     """Eriksson eq. 3.1 with the camera term A = max over cameras (light_f column 7):
     P = A + w_obj d_object + w_int i + p_user, d_object = |p - c|."""

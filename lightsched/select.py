@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba as nb
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ranks_before(key_a, id_a, key_b, id_b):
     """True if (key_a, id_a) ranks before (key_b, id_b): higher key, ties lower id."""
     return key_a > key_b or (key_a == key_b and id_a < id_b)
@@ -28,7 +28,7 @@ F_ROWS = 6
 I_ROWS = 11
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def hysteresis_key(p, lid, si, h, h_abs):
     """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL).
 
@@ -43,7 +43,7 @@ def hysteresis_key(p, lid, si, h, h_abs):
     return p
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def topk_insert(sf, si, nbest, key, lid, p, row):
     """Inserts one candidate into the sorted top-K rows (F_KEY, F_P, I_ID, I_ROW); returns
     the new size."""
