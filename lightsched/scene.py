@@ -594,6 +594,31 @@ class ObjectStore:
         self.version += 1
 
 
+def _call_rows(fields: dict[str, Any]) -> int:
+    """Rows of a set_ call: the length of its (required) id array."""
+    if fields.get("id") is None:
+        raise ValidationError("id", None, "required")
+    return _len_of("id", fields["id"])
+
+
+def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str, Any],
+            what: str) -> None:
+    """update_ of some fields by id: validates the merged rows, then writes them."""
+    ids, rows = _id_rows(store.id, fields.pop("id", None), what)
+    cols = validate(fields, store.columns(rows), ids.size)
+    for f in names[1:]:
+        getattr(store, f)[rows] = cols[f]
+    store.version += 1
+
+
+def _keep_mask(store_ids: np.ndarray, ids: Any, what: str) -> np.ndarray:
+    """Rows that a remove_ call keeps (every id must exist)."""
+    _, rows = _id_rows(store_ids, ids, what)
+    keep = np.ones(store_ids.size, bool)
+    keep[rows] = False
+    return keep
+
+
 class SceneAPI:
     """The set_/update_/remove_/frame surface of DESIGN section 7, shared by the fast
     Scheduler and the oracle's; subclasses implement ``_frame``.
@@ -614,43 +639,24 @@ class SceneAPI:
 
     # lights
     def set_lights(self, **fields: Any) -> None:
-        n = _len_of("id", fields.get("id", None)) if "id" in fields else None
-        if n is None:
-            raise ValidationError("id", None, "required")
-        self.lights.assign(LightStore.validate(fields, None, n))
+        self.lights.assign(LightStore.validate(fields, None, _call_rows(fields)))
 
     def update_lights(self, **fields: Any) -> None:
-        ids, rows = _id_rows(self.lights.id, fields.pop("id", None), "light")
-        cols = LightStore.validate(fields, self.lights.columns(rows), ids.size)
-        for f in LIGHT_FIELDS[1:]:
-            getattr(self.lights, f)[rows] = cols[f]
-        self.lights.version += 1
+        _update(self.lights, LightStore.validate, LIGHT_FIELDS, fields, "light")
 
     def remove_lights(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
-        _, rows = _id_rows(self.lights.id, id, "light")
-        keep = np.ones(len(self.lights), bool)
-        keep[rows] = False
+        keep = _keep_mask(self.lights.id, id, "light")
         self.lights.assign(self.lights.columns(keep))
 
     # objects
     def set_objects(self, **fields: Any) -> None:
-        n = _len_of("id", fields.get("id", None)) if "id" in fields else None
-        if n is None:
-            raise ValidationError("id", None, "required")
-        self.objects.assign(ObjectStore.validate(fields, None, n))
+        self.objects.assign(ObjectStore.validate(fields, None, _call_rows(fields)))
 
     def update_objects(self, **fields: Any) -> None:
-        ids, rows = _id_rows(self.objects.id, fields.pop("id", None), "object")
-        cols = ObjectStore.validate(fields, self.objects.columns(rows), ids.size)
-        for f in OBJECT_FIELDS[1:]:
-            getattr(self.objects, f)[rows] = cols[f]
-        self.objects.version += 1
+        _update(self.objects, ObjectStore.validate, OBJECT_FIELDS, fields, "object")
 
     def remove_objects(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
-        _, rows = _id_rows(self.objects.id, id, "object")
-        keep = np.ones(len(self.objects), bool)
-        keep[rows] = False
-        self.objects.keep_rows(keep)
+        self.objects.keep_rows(_keep_mask(self.objects.id, id, "object"))
 
     def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False) -> Any:
         """Steps one frame (DESIGN section 2) and returns its Frame (section 3)."""
