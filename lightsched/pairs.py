@@ -283,14 +283,15 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _exact_pair(hot, lf, j, typ, v, vis, pair_obj, pair_p, n, model, w_obj, w_int):
-    """The exact float64 Affects test of light j and visible object v (mask, d2 <= r*r,
-    then _pair_p); on a hit appends (object row, P) at n. Returns the new n."""
-    vis_box, _, vis_rows = vis
-    if np.int64(vis_box[v, 6]) & np.int64(hot[j, 4]) == 0:
+def _exact_pair(hot, lf, j, lm, typ, v, vis_box, vis_rows, pair_obj, pair_p, n, model, w_obj,
+                w_int):
+    """The exact float64 Affects test of light j (mask lm) and visible object v (mask,
+    d2 <= r*r, then _pair_p); on a hit appends (object row, P) at n. Returns the new n."""
+    if np.int64(vis_box[v, 6]) & lm == 0:
         return n
+    r = hot[j, 3]
     d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
-    if not d2 <= hot[j, 3] * hot[j, 3]:
+    if not d2 <= r * r:
         return n
     hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
     if hit:
@@ -393,11 +394,11 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
                 keep[m] = v
                 m += dx * dx + dy * dy + dz * dz <= rr32
             for i in range(m):
-                n = _exact_pair(hot, lf, j, typ, keep[i], vis, pair_obj, pair_p, n, model,
-                                w_obj, w_int)
+                n = _exact_pair(hot, lf, j, lm, typ, keep[i], vis_box, vis_rows, pair_obj,
+                                pair_p, n, model, w_obj, w_int)
     for b in range(big_pos.shape[0]):
-        n = _exact_pair(hot, lf, j, typ, big_pos[b], vis, pair_obj, pair_p, n, model, w_obj,
-                        w_int)
+        n = _exact_pair(hot, lf, j, lm, typ, big_pos[b], vis_box, vis_rows, pair_obj, pair_p,
+                        n, model, w_obj, w_int)
     count[t] = n - offsets[t]
     return keep
 
