@@ -404,20 +404,22 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
+def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
     its own histogram (parallel); within an object the runs follow each other, so the
-    order of its lights is the order of ``rows`` whatever the thread count. Returns (start [N+1],
-    obj_pairs [H, 2] = (P, light row) per pair: one record, one cache line touched per
-    scattered pair)."""
+    order of its lights is the order of ``rows`` whatever the thread count. out = (hist
+    [GROUP_PARTS, N+1] int64 scratch, start [N+1], obj_pairs [H, 2]), reused buffers; fills
+    start and obj_pairs = (P, light row) per pair: one record, one cache line touched per
+    scattered pair."""
+    hist, start, obj_pairs = out
     n_l = rows.shape[0]
-    hist = np.zeros((GROUP_PARTS, n_obj + 1), np.int64)
+    n_obj = start.shape[0] - 1
     for q in nb.prange(GROUP_PARTS):
+        hist[q, :] = 0
         for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
             for e in range(offsets[t], offsets[t] + count[t]):
                 hist[q, pair_obj[e]] += 1
-    start = np.empty(n_obj + 1, np.int64)
     run = 0
     for o in range(n_obj):
         start[o] = run
@@ -426,7 +428,6 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
             hist[q, o] = run
             run += c
     start[n_obj] = run
-    obj_pairs = np.empty((run, 2))
     for q in nb.prange(GROUP_PARTS):
         for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
             j = rows[t]
@@ -436,7 +437,6 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, n_obj):
                 obj_pairs[d, 0] = pair_p[e]
                 obj_pairs[d, 1] = j
                 hist[q, o] = d + 1
-    return start, obj_pairs
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -20,6 +20,7 @@ import numpy as np
 from .frame import Frame, empty_frame
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
 from .pairs import (
+    GROUP_PARTS,
     grid_shape,
     group_pairs,
     light_bounds,
@@ -135,7 +136,13 @@ class Scheduler(SceneAPI):
         count = light_pass((hot, lf), rows, grid, vis, offsets,
                            pair_obj, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
         t = _lap(seconds, "pairs", t)
-        lists = group_pairs(rows, offsets, count, pair_obj, pair_p, len(objs))
+        n, n_pairs = len(objs), int(count.sum())
+        lists = (self._scratch("start", n + 1, np.int64)[:n + 1],
+                 self._scratch("obj_pairs", 2 * n_pairs, np.float64)[:2 * n_pairs]
+                 .reshape(n_pairs, 2))
+        hist = self._scratch("hist", GROUP_PARTS * (n + 1), np.int64)
+        group_pairs(rows, offsets, count, pair_obj, pair_p,
+                    (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1),) + lists)
         t = _lap(seconds, "group", t)
 
         reset = objs.is_new | ~objs.get("was_visible")
