@@ -121,10 +121,11 @@ def _counting_sort(key, ncell):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def light_order(hot, rows, g_f, dims):
-    """``rows`` sorted by the grid cell of the light's position (a stable counting sort,
-    lights off the grid first): consecutive lights then walk the same columns of objects
-    while they are in cache. The order of lights within an object's list does not matter
-    (selection breaks ties by id), so this changes nothing but speed."""
+    """``rows`` sorted by the grid cell of the light's position (a stable counting sort;
+    lights beyond the grid count in its border cells): consecutive lights then walk the
+    same columns of objects while they are in cache. The order of lights within an
+    object's list does not matter (selection breaks ties by id), so this changes nothing
+    but speed."""
     ncell = dims[0] * dims[1] * dims[2]
     key = np.empty(rows.shape[0], np.int64)
     counts = np.zeros(ncell + 2, np.int64)
