@@ -131,17 +131,29 @@ def bench_size(n: int, l: int, args: argparse.Namespace) -> dict[str, Any]:
     scene = make_scene(n, l, args.seed, not args.no_shadows)
     say(f"   scene built in {time.perf_counter() - t0:.2f} s "
         f"({int(scene.lights['shadows'].sum())} shadowed lights)")
-    say(f"   {args.warmup} warm-up frames, then {args.frames} timed frames ...")
-    r = run_sequence(lightsched.Scheduler, scene, Config(max_lights=args.max_lights),
-                     args.frames, args.warmup)
+    say(f"   {args.runs} runs of {args.warmup} warm-up frames, then {args.frames} timed "
+        "frames ...")
+    runs = []
+    for _ in range(args.runs):
+        runs.append(run_sequence(lightsched.Scheduler, scene,
+                                 Config(max_lights=args.max_lights), args.frames, args.warmup))
+        say(f"     run median {np.median(runs[-1]['times']) * 1e3:.2f} ms")
+    r = runs[-1]
+    r["times"] = np.concatenate([x["times"] for x in runs])
+    r["seconds"] = [d for x in runs for d in x["seconds"]]
+    run_ms = [float(np.median(x["times"])) * 1e3 for x in runs]
     ms = r["times"] * 1e3
-    r.update(n=n, l=l, median=float(np.median(ms)), p10=float(np.percentile(ms, 10)),
+    # The machines are noisy: the figure is the median of the runs' medians, with their
+    # spread beside it, and p10..p90 over every timed frame.
+    r.update(n=n, l=l, median=float(np.median(run_ms)), run_lo=min(run_ms),
+             run_hi=max(run_ms), p10=float(np.percentile(ms, 10)),
              p90=float(np.percentile(ms, 90)))
     r["stages"] = {k: float(np.median([d.get(k, 0.0) for d in r["seconds"]])) * 1e3
                    for k in stage_names(r["seconds"])}
     warm = ", ".join(f"{w * 1e3:.0f}" for w in r["warm"])
     say(f"   warm-up frames (ms): {warm}")
-    say(f"   frame: median {r['median']:.2f} ms, p10..p90 {r['p10']:.2f}..{r['p90']:.2f} ms")
+    say(f"   frame: median of run medians {r['median']:.2f} ms (runs {r['run_lo']:.2f}.."
+        f"{r['run_hi']:.2f}), p10..p90 {r['p10']:.2f}..{r['p90']:.2f} ms")
     for k, v in r["stages"].items():
         say(f"     {k:<20} {v:9.3f} ms")
     say(f"   last frame: {r['visible_objects']} visible objects, {r['visible_lights']} visible "
@@ -226,16 +238,18 @@ def render(results: list[dict[str, Any]], compare: dict[str, Any] | None,
            f"Scenes: `lightsched.scenes.city(N, L, seed={args.seed})` (10% spots, one sun; "
            f"shadowed: {shadows}), one camera (fov_y 60 degrees, 16:9, 1080 px); "
            f"K = {args.max_lights}, default Config (fade on, exact precision). Every light "
-           f"moves every frame; only `Scheduler.frame` is timed, {args.frames} frames after "
-           f"{args.warmup} warm-up frames.", ""]
+           f"moves every frame; only `Scheduler.frame` is timed: {args.runs} runs (a new "
+           f"Scheduler each) of {args.frames} frames after {args.warmup} warm-up frames; "
+           "\"median\" is the median of the runs' medians, stage times are medians over all "
+           "timed frames.", ""]
     stages = stage_names([r["stages"] for r in results])
-    head = ["N", "L", "median ms", "p10..p90 ms", *[f"{s} ms" for s in stages],
+    head = ["N", "L", "median ms", "run medians ms", "p10..p90 ms", *[f"{s} ms" for s in stages],
             "visible obj", "mean set"]
     out.append("| " + " | ".join(head) + " |")
     out.append("|" + "---|" * len(head))
     for r in results:
         cells = [fmt_count(r["n"]), fmt_count(r["l"]), f"{r['median']:.2f}",
-                 f"{r['p10']:.2f}..{r['p90']:.2f}",
+                 f"{r['run_lo']:.2f}..{r['run_hi']:.2f}", f"{r['p10']:.2f}..{r['p90']:.2f}",
                  *[f"{r['stages'].get(s, 0.0):.2f}" for s in stages],
                  str(r["visible_objects"]), f"{r['mean_set']:.2f}"]
         out.append("| " + " | ".join(cells) + " |")
@@ -275,6 +289,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="comma-separated N:L pairs (default 10k:1k,100k:10k)")
     p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
     p.add_argument("--warmup", type=int, default=3, help="warm-up frames (default 3)")
+    p.add_argument("--runs", type=int, default=3,
+                   help="runs per size, each with a new Scheduler (default 3)")
     p.add_argument("--max-lights", type=int, default=8, help="K (default 8)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-shadows", action="store_true", help="no light casts shadows")
@@ -284,8 +300,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="frames of the oracle comparison (default 10)")
     p.add_argument("--write", action="store_true", help="write the tables into bench/RESULTS.md")
     args = p.parse_args(argv)
-    if args.frames < 1 or args.warmup < 1 or args.compare_frames < 1:
-        p.error("--frames, --warmup and --compare-frames must be >= 1")
+    if args.frames < 1 or args.warmup < 1 or args.compare_frames < 1 or args.runs < 1:
+        p.error("--frames, --warmup, --runs and --compare-frames must be >= 1")
 
     m = machine()
     say(f"lightsched {lightsched.__version__} at {git_commit()}; {m['cpu']}, {m['nproc']} CPUs, "
