@@ -186,15 +186,19 @@ def validate_cameras(cameras: Any) -> list[Camera]:
         seen.add(int(cid))
         pos = _camera_vector("position", i, c.position, 3)
         fwd = _camera_vector("forward", i, c.forward, 3)
-        fwd_n = float(_norm3(fwd[None])[0])
+        fx, fy, fz = (float(v) for v in fwd)
+        fwd_n = math.sqrt(fx * fx + fy * fy + fz * fz)
         if not 0.0 < fwd_n < math.inf:
             raise ValidationError("cameras.forward", i, "must have a non-zero length that "
                                   "sqrt(x*x + y*y + z*z) can represent")
         up = _camera_vector("up", i, c.up, 3)
-        fn = fwd / fwd_n
-        cr = np.cross(fn, up)
-        upn = float(_norm3(up[None])[0])
-        if not 0.0 < upn < math.inf or float(_norm3(cr[None])[0]) <= 1e-9 * upn:
+        # Plain floats: a frame validates its cameras every call, numpy's per-call cost
+        # would dominate three-element vectors.
+        fx, fy, fz = fx / fwd_n, fy / fwd_n, fz / fwd_n
+        ux, uy, uz = (float(v) for v in up)
+        cx, cy, cz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux
+        upn = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if not 0.0 < upn < math.inf or math.sqrt(cx * cx + cy * cy + cz * cz) <= 1e-9 * upn:
             raise ValidationError("cameras.up", i, "must be non-zero and not parallel to forward")
         vals = {}
         # Each field is parsed and range-checked before the next one (table order).
