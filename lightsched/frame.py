@@ -68,6 +68,14 @@ class Frame:
         return {name: getattr(self, name) for name in FRAME_ARRAYS}
 
 
+def freeze(frame: Frame) -> Frame:
+    """Makes every array of the frame read-only: a frame is a snapshot, and the fast
+    scheduler keeps its light_ids and fade_state as the next frame's slot state."""
+    for arr in frame.arrays().values():
+        arr.flags.writeable = False
+    return frame
+
+
 def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
     """A frame where no object has a light (empty slots as DESIGN section 3 defines them),
     except for the arrays ``given``, which are taken as they are (not copied)."""

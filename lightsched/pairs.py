@@ -472,14 +472,16 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
     (step 3 of Fade); lists = (start, obj_pairs) from group_pairs; ids = light ids by row;
-    state_in / state_out = (slot ids, slot weights f64, slot states, selected ids), each
-    [N, K]; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
-    count, candidates); params = (h, h_abs, dt/fade_in, dt/fade_out, fade_in, fade_out).
+    state_in = (slot ids, slot weights f64, slot states, selected ids), each [N, K] (the
+    ids and states are last frame's light_ids and fade_state outputs); state_out =
+    (slot weights f64, selected ids); out = (light_ids, light_index, priority f32,
+    fade_weight f32, fade_state, count, candidates); params = (h, h_abs, dt/fade_in,
+    dt/fade_out, fade_in, fade_out).
     """
     visible, reset = objs
     start, obj_pairs = lists
     s_id, s_w, s_st, s_sel = state_in
-    n_id, n_w, n_st, n_sel = state_out
+    n_w, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
     h = params[0]
     h_abs = params[1]
@@ -522,18 +524,14 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
             for m in range(k):
                 if m < cnt:
-                    n_id[o, m] = si[I_NEW_ID, m]
                     n_w[o, m] = sf[F_NEW_W, m]
-                    n_st[o, m] = si[I_NEW_ST, m]
                     o_ids[o, m] = si[I_NEW_ID, m]
                     o_index[o, m] = si[I_NEW_ROW, m]
                     o_prio[o, m] = np.float32(sf[F_NEW_P, m])
                     o_w[o, m] = np.float32(sf[F_NEW_W, m])
                     o_st[o, m] = si[I_NEW_ST, m]
                 else:
-                    n_id[o, m] = -1
                     n_w[o, m] = 0.0
-                    n_st[o, m] = 0
                     o_ids[o, m] = -1
                     o_index[o, m] = -1
                     o_prio[o, m] = 0.0

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .frame import Frame, empty_frame
+from .frame import Frame, empty_frame, freeze
 from .scene import (
     DIRECTIONAL,
     FADING_IN,
@@ -447,7 +447,7 @@ class Scheduler(SceneAPI):
             },
             "seconds": {"total": time.perf_counter() - t0},
         }
-        return frame
+        return freeze(frame)
 
 
 def schedule(lights: dict[str, Any], objects: dict[str, Any], cameras: Any,

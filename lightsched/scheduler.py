@@ -17,7 +17,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from .frame import Frame, empty_frame
+from .frame import Frame, empty_frame, freeze
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
 from .pairs import (
     GROUP_PARTS,
@@ -39,8 +39,11 @@ BRUTE_FORCE_PAIRS = 1 << 15
 CELL_PER_RADIUS = 1.0
 
 
+# Per-object state: slot ids and states are the frame's own (read-only) light_ids and
+# fade_state outputs; the float64 weights and last frame's selection are kept apart.
 _STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
           ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
+_KEPT = (("slot_weight", np.float64), ("selected", np.int32))
 
 
 class Scheduler(SceneAPI):
@@ -152,7 +155,7 @@ class Scheduler(SceneAPI):
         state_in = tuple(objs.get(name) for name, _, _ in _STATE)
         state_out = self._spare_state
         if state_out is None or state_out[0].shape != (n, k):
-            state_out = tuple(np.empty((n, k), dtype) for _, dtype, _ in _STATE)
+            state_out = tuple(np.empty((n, k), dtype) for _, dtype in _KEPT)
         out = (np.empty((n, k), np.int32), np.empty((n, k), np.int32),
                np.empty((n, k), np.float32), np.empty((n, k), np.float32),
                np.empty((n, k), np.uint8), np.empty(n, np.int32), np.empty(n, np.int32))
@@ -161,15 +164,18 @@ class Scheduler(SceneAPI):
         object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params)
         t = _lap(seconds, "objects", t)
 
-        for (name, _, _), arr in zip(_STATE, state_out, strict=True):
+        for (name, _), arr in zip(_KEPT, state_out, strict=True):
             objs.put(name, arr)
+        objs.put("slot_light", out[0])
+        objs.put("slot_state", out[4])
         objs.put("was_visible", vis_o)
-        self._spare_state = state_in  # last frame's state: next frame writes over it
+        self._spare_state = (state_in[1], state_in[3])  # next frame writes over these
         frame = empty_frame(
             objs.id, k, cfg.cascades, visible=vis_o.copy(), count=out[5], candidates=out[6],
             light_ids=out[0], light_index=out[1], priority=out[2], fade_weight=out[3],
             fade_state=out[4], directional_lights=directional.astype(np.int32),
             visible_lights=lights.id[vis_l], cascade_splits=splits)
+        freeze(frame)
         has_shadowed = bool(np.any(lights.shadows & vis_l))
         plan["visibility"] = f"frustum planes, {len(cameras)} camera(s)"
         plan["priority"] = cfg.model + " (exact float64)"
