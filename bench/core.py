@@ -138,10 +138,10 @@ def bench_size(n: int, l: int, args: argparse.Namespace) -> dict[str, Any]:
         runs.append(run_sequence(lightsched.Scheduler, scene,
                                  Config(max_lights=args.max_lights), args.frames, args.warmup))
         say(f"     run median {np.median(runs[-1]['times']) * 1e3:.2f} ms")
-    r = runs[-1]
+    run_ms = [float(np.median(x["times"])) * 1e3 for x in runs]
+    r = dict(runs[-1])
     r["times"] = np.concatenate([x["times"] for x in runs])
     r["seconds"] = [d for x in runs for d in x["seconds"]]
-    run_ms = [float(np.median(x["times"])) * 1e3 for x in runs]
     ms = r["times"] * 1e3
     # The machines are noisy: the figure is the median of the runs' medians, with their
     # spread beside it, and p10..p90 over every timed frame.
