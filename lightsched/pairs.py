@@ -59,6 +59,7 @@ MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
+RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)
 F32_ULP = 2.0**-23           # float32 rounding is at most half of this, relative
 
 
@@ -73,16 +74,19 @@ def _cell(x, origin, inv_h, dim):
 
 
 def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """(origin + 1/h as float64[4], dims int64[3]) covering the box with cells of edge
-    ``cell``, grown until there are at most MAX_CELLS."""
+    """(origin and 1/cell edge per axis as float64[6], dims int64[3]) covering the box with
+    cells of edge ``cell`` (grown until there are at most MAX_CELLS), cut RUN_SPLIT times
+    finer along z: a column of cells is one run of objects whatever its cell count, so a
+    finer z trims each run to the light's chord at no cost per column."""
     extent = np.maximum(hi - lo, 0.0)
-    h = max(cell, float(extent.max()) / MAX_CELLS ** (1 / 3) * 1.0001, 1e-300)
+    h = max(cell, float(extent.max()) / (MAX_CELLS / RUN_SPLIT) ** (1 / 3) * 1.0001, 1e-300)
     while True:
-        dims = np.maximum(np.ceil(extent / h), 1).astype(np.int64)
+        edge = np.array([h, h, h / RUN_SPLIT])
+        dims = np.maximum(np.ceil(extent / edge), 1).astype(np.int64)
         if int(np.prod(dims)) <= MAX_CELLS:
             break
         h *= 1.25
-    return np.append(lo.astype(np.float64), 1.0 / h), dims
+    return np.concatenate([lo.astype(np.float64), 1.0 / edge]), dims
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -92,8 +96,8 @@ def _centre_cells(lo, hi, visible, g_f, dims):
     for o in nb.prange(n):
         if visible[o]:
             x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
-            y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[3], dims[1])
-            z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[3], dims[2])
+            y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[4], dims[1])
+            z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[5], dims[2])
             key[o] = (x * dims[1] + y) * dims[2] + z
         else:
             key[o] = -1
@@ -132,8 +136,8 @@ def light_order(hot, rows, g_f, dims):
     for t in range(rows.shape[0]):
         j = rows[t]
         x = _cell(hot[j, 0], g_f[0], g_f[3], dims[0])
-        y = _cell(hot[j, 1], g_f[1], g_f[3], dims[1])
-        z = _cell(hot[j, 2], g_f[2], g_f[3], dims[2])
+        y = _cell(hot[j, 1], g_f[1], g_f[4], dims[1])
+        z = _cell(hot[j, 2], g_f[2], g_f[5], dims[2])
         key[t] = (x * dims[1] + y) * dims[2] + z
         counts[key[t] + 1] += 1
     for c in range(ncell):
@@ -221,8 +225,8 @@ def _light_cells(hot, j, g_f, dims, ext):
     reaches: its bounding cube widened by the largest object half-extent (and a relative
     1e-9 so rounding never drops a pair); empty (x1 < x0) if that misses the grid."""
     x0, x1, mx = _axis_cells(hot[j, 0], hot[j, 3] + ext[0], g_f[0], g_f[3], dims[0])
-    y0, y1, my = _axis_cells(hot[j, 1], hot[j, 3] + ext[1], g_f[1], g_f[3], dims[1])
-    z0, z1, mz = _axis_cells(hot[j, 2], hot[j, 3] + ext[2], g_f[2], g_f[3], dims[2])
+    y0, y1, my = _axis_cells(hot[j, 1], hot[j, 3] + ext[1], g_f[1], g_f[4], dims[1])
+    z0, z1, mz = _axis_cells(hot[j, 2], hot[j, 3] + ext[2], g_f[2], g_f[5], dims[2])
     if mx or my or mz:
         return (1, 0, 0, 0, 0, 0)
     return (x0, y0, z0, x1, y1, z1)
@@ -316,7 +320,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     w_int = params[2]
     reach = 0.0
     for a in range(3):
-        reach = max(reach, dims[a] / g_f[3])
+        reach = max(reach, dims[a] / g_f[3 + a])
     count = np.zeros(rows.shape[0], np.int64)
     n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
     for ch in nb.prange(n_chunks):
@@ -363,20 +367,19 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     zero = np.float32(0.0)
     # Cut the cube to the sphere column by column: a column whose slab the (widened)
     # sphere misses is skipped, and a run is trimmed to the sphere's chord.
-    h = 1.0 / g_f[3]
     big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
     rr = big_r * big_r
     for x in range(c[0], c[3] + 1):
-        dxx = _slab_d2(hot[j, 0], x, g_f[0], h, dims[0], ext[0])
+        dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
         if dxx > rr:
             continue
         for y in range(c[1], c[4] + 1):
-            dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], h, dims[1], ext[1])
+            dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
             if dd > rr:
                 continue
             zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
-            z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[3], dims[2]))
-            z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[3], dims[2]))
+            z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
+            z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
             if z1 < z0:
                 continue
             base = (x * dims[1] + y) * dims[2]

@@ -21,6 +21,7 @@ from .frame import Frame, empty_frame, freeze
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
 from .pairs import (
     GROUP_PARTS,
+    RUN_SPLIT,
     grid_shape,
     group_pairs,
     light_bounds,
@@ -125,8 +126,8 @@ class Scheduler(SceneAPI):
         grid = (g_f, dims, cell_start, ext, big_pos)
         if "pairs" not in plan:
             plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                             f"{1 / g_f[3]:.3g} m, {big_pos.size} objects larger than a cell "
-                             f"tested directly), walked by {rows.size} lights")
+                             f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {big_pos.size} objects "
+                             f"larger than a cell tested directly), walked by {rows.size} lights")
         t = _lap(seconds, "prep", t)
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
