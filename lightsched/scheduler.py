@@ -1,12 +1,14 @@
 """Scheduler and schedule(): run the stages of DESIGN section 2 on the fast path.
 
 Takes the stores (scene.py) and cameras; returns a Frame (frame.py). Stages, each timed in
-stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid,
-pairs (Affects and P per light), group (pairs by object), objects (top-K and fade per
-object), output; pairs.py describes the light-major pipeline.
+stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid
+(its shape), order (visible objects by cell), prep (their records), pairs (Affects and P
+per light), group (pairs by object), objects (top-K and fade per object), output; pairs.py
+describes the light-major pipeline.
 The per-object state (slots, weights, last frame's selection) lives in the object store's
-``state`` so it follows ids through set_/remove_ calls; a frame computes the new state into
-fresh arrays and swaps it in only when everything succeeded.
+``state`` so it follows ids through set_/remove_ calls; the slot ids and states are the last
+(read-only) frame's light_ids and fade_state. A frame computes the new state into other
+arrays and swaps it in only when everything succeeded.
 """
 
 from __future__ import annotations

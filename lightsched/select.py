@@ -3,8 +3,8 @@
 Takes the competing lights of one object as a stream of (key, id, P, row) and keeps the K
 of highest key, ties to the lower light id; key = P, or P + h|P| + hysteresis_abs for a light
 that was in the object's selected set last frame, so near-equal lights do not flicker in
-and out of the set. Returns the selected set in key order. The insertion
-is inlined into the fused object pass of pairs.py.
+and out of the set. Returns the selected set in key order. The insertion is inlined into
+the object pass of pairs.py, which skips the ranking when every competing light fits in K.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ I_ROWS = 11
 def hysteresis_key(p, lid, si, h, h_abs):
     """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL).
 
-    pairs._consider fuses a copy of this rule with its old-slot lookup (one loop over K).
+    pairs._select fuses a copy of this rule with the old-slot lookup (pairs._match_old_slot).
     """
     for m in range(si.shape[1]):
         q = si[I_PREV_SEL, m]
