@@ -7,12 +7,12 @@ object. Pairs are plain arrays (row, P), never Python objects.
 
 The work is light-major, in four kernels:
 1. ``visible_order`` + ``visible_objects``: visible objects sorted by the grid cell of their
-   centre (a counting sort), with compact float32 boxes; objects larger than a cell go to a
-   short list every light tests.
+   centre (a counting sort), one 64-byte record each; objects larger than a cell go past the
+   last cell, to a short list every light tests.
 2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
    the centre of an object it reaches (its sphere widened by the largest object
-   half-extent, cut column by column), each column one contiguous run of objects; a conservative float32
-   sphere-box test filters, then the exact float64 Affects test and P (priority.py). Each
+   half-extent, cut column by column), each column one contiguous run of objects; the
+   exact range test (d2 <= r*r) filters, then the rest of Affects and P (priority.py). Each
    light writes its own segment of the pair buffers, sized beforehand by ``light_bounds``,
    so the result does not depend on the thread count. The light is fixed in the inner
    loop: its type and data stay in registers, and the objects it meets are neighbours in
@@ -60,7 +60,6 @@ GROUP_PARTS = 2              # independent histograms when grouping pairs by obj
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)
-F32_ULP = 2.0**-23           # float32 rounding is at most half of this, relative
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -91,29 +90,40 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _centre_cells(lo, hi, visible, g_f, dims):
+    """Per object: its centre's cell, ncell for an object with a half-extent over one cell
+    edge (it goes past the last cell, to the big objects every light tests directly), or
+    -1 if invisible."""
     n = lo.shape[0]
+    ncell = dims[0] * dims[1] * dims[2]
+    cell_edge = 1.0 / g_f[3]
     key = np.empty(n, np.int64)
     for o in nb.prange(n):
-        if visible[o]:
-            x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
-            y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[4], dims[1])
-            z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[5], dims[2])
-            key[o] = (x * dims[1] + y) * dims[2] + z
-        else:
+        if not visible[o]:
             key[o] = -1
+            continue
+        big = False
+        for a in range(3):
+            big |= (hi[o, a] - lo[o, a]) / 2 > cell_edge
+        if big:
+            key[o] = ncell
+            continue
+        x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
+        y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[4], dims[1])
+        z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[5], dims[2])
+        key[o] = (x * dims[1] + y) * dims[2] + z
     return key
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _counting_sort(key, ncell):
-    counts = np.zeros(ncell + 1, np.int64)
+    counts = np.zeros(ncell + 2, np.int64)
     for o in range(key.shape[0]):
         if key[o] >= 0:
             counts[key[o] + 1] += 1
-    for c in range(ncell):
+    for c in range(ncell + 1):
         counts[c + 1] += counts[c]
     cell_start = counts.copy()
-    vis_rows = np.empty(counts[ncell], np.int64)
+    vis_rows = np.empty(counts[ncell + 1], np.int64)
     pos_of = np.full(key.shape[0], -1, np.int64)
     for o in range(key.shape[0]):
         if key[o] >= 0:
@@ -153,26 +163,20 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
                   dims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
     in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N]
-    (-1 if invisible), cell_start int64[ncell+1]): the objects centred in cell c are
-    positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run."""
+    (-1 if invisible), cell_start int64[ncell+2]): the objects centred in cell c are
+    positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run; the
+    objects larger than a cell come last, from cell_start[ncell] to V."""
     key = _centre_cells(lo, hi, visible, g_f, dims)
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def visible_objects(lo, hi, omask, pos_of, g_f, out):
-    """Per visible position (parallel), written into out = (vis_box [V, 8] float64,
-    vis_box32 [V, 8] float32) (reused buffers): (lo, hi, mask, e2 = |hi - lo|^2), one
-    cache line for the exact test; the box relative to the grid origin as (lo, 0, hi, 0)
-    in float32 for the filter (32 bytes, two objects a cache line). Returns (big_pos,
-    ext): the objects with a half-extent over one cell edge, which every light tests
-    directly (their float32 box is +inf so the cell scan never takes them), and the
-    largest half-extent per axis of the others, which widens every light's cell range."""
-    vis_box, vis_box32 = out
-    nv = vis_box.shape[0]
+def visible_objects(lo, hi, omask, pos_of, n_small, vis_box):
+    """Per visible position (parallel), written into vis_box [V, 8] float64 (a reused
+    buffer): (lo, hi, mask, e2 = |hi - lo|^2), one cache line per object for the tests.
+    Returns the largest half-extent per axis of the objects at positions below n_small
+    (those in cells), which widens every light's cell range."""
     n = lo.shape[0]
-    big = np.zeros(nv, np.bool_)
-    cell_edge = 1.0 / g_f[3]
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     chunk_ext = np.zeros((n_chunks, 3))
     # Rows are read in order and written at their position: scattered stores do not
@@ -185,17 +189,7 @@ def visible_objects(lo, hi, omask, pos_of, g_f, out):
             for a in range(3):
                 vis_box[v, a] = lo[o, a]
                 vis_box[v, 3 + a] = hi[o, a]
-                vis_box32[v, a] = np.float32(lo[o, a] - g_f[a])
-                vis_box32[v, 4 + a] = np.float32(hi[o, a] - g_f[a])
-                if (hi[o, a] - lo[o, a]) / 2 > cell_edge:
-                    big[v] = True
-            vis_box32[v, 3] = 0.0
-            vis_box32[v, 7] = 0.0
-            if big[v]:
-                for a in range(8):
-                    vis_box32[v, a] = np.inf
-            else:
-                for a in range(3):
+                if v < n_small:
                     chunk_ext[ch, a] = max(chunk_ext[ch, a], (hi[o, a] - lo[o, a]) / 2)
             ex = hi[o, 0] - lo[o, 0]
             ey = hi[o, 1] - lo[o, 1]
@@ -206,8 +200,7 @@ def visible_objects(lo, hi, omask, pos_of, g_f, out):
     for ch in range(n_chunks):
         for a in range(3):
             ext[a] = max(ext[a], chunk_ext[ch, a])
-    big_pos = np.flatnonzero(big).astype(np.int32)
-    return big_pos, ext
+    return ext
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -312,33 +305,29 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
 
     lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
-    big_pos); vis = (vis_box, vis_box32, vis_rows); params = (model, w_obj,
+    big_pos); vis = (vis_box, vis_rows); params = (model, w_obj,
     w_int). Returns count per light."""
-    g_f, dims = grid[0], grid[1]
     model = int(params[0])
     w_obj = params[1]
     w_int = params[2]
-    reach = 0.0
-    for a in range(3):
-        reach = max(reach, dims[a] / g_f[3 + a])
     count = np.zeros(rows.shape[0], np.int64)
     n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
     for ch in nb.prange(n_chunks):
         keep = np.empty(256, np.int32)
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
             keep = _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count,
-                              keep, model, w_obj, w_int, reach)
+                              keep, model, w_obj, w_int)
     return count
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, keep, model,
-               w_obj, w_int, reach):
+               w_obj, w_int):
     """Light rows[t]'s pairs into its segment of pair_obj / pair_p (see light_pass);
     returns the (possibly regrown) filter scratch."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_box32, vis_rows = vis
+    vis_box, vis_rows = vis
     n_vis = vis_box.shape[0]
     j = rows[t]
     lm = np.int64(hot[j, 4])
@@ -354,17 +343,11 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
         count[t] = n - offsets[t]
         return keep
     r = hot[j, 3]
+    p0 = hot[j, 0]
+    p1 = hot[j, 1]
+    p2 = hot[j, 2]
+    rr_exact = r * r
     c = _light_cells(hot, j, g_f, dims, ext)
-    q0 = np.float32(hot[j, 0] - g_f[0])
-    q1 = np.float32(hot[j, 1] - g_f[1])
-    q2 = np.float32(hot[j, 2] - g_f[2])
-    # Coordinates near the grid are at most ``reach`` from its origin; each float32
-    # value is off by at most half an ulp of that, twice per axis plus the subtraction,
-    # so this grown radius can only let the filter pass more pairs, never fewer.
-    far = reach + abs(hot[j, 0] - g_f[0]) + abs(hot[j, 1] - g_f[1]) + abs(hot[j, 2] - g_f[2])
-    r32 = np.float32((r + 4.0 * F32_ULP * far * math.sqrt(3.0)) * (1.0 + 1e-5))
-    rr32 = r32 * r32
-    zero = np.float32(0.0)
     # Cut the cube to the sphere column by column: a column whose slab the (widened)
     # sphere misses is skipped, and a run is trimmed to the sphere's chord.
     big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
@@ -383,20 +366,17 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
             if z1 < z0:
                 continue
             base = (x * dims[1] + y) * dims[2]
-            # The objects centred in a column of cells are one run of positions. The
-            # filter compacts the survivors without branching (a filter that fails at
-            # random would mispredict), then the exact test visits only them.
+            # The objects centred in a column of cells are one run of positions. The range
+            # test (exact, DESIGN's d2 <= r*r) compacts the survivors without branching (a
+            # test that fails at random would mispredict); the rest runs on survivors only.
             v0 = cell_start[base + z0]
             v1 = cell_start[base + z1 + 1]
             if v1 - v0 > keep.shape[0]:
                 keep = np.empty(2 * (v1 - v0), np.int32)
             m = 0
             for v in range(v0, v1):
-                dx = max(max(vis_box32[v, 0] - q0, q0 - vis_box32[v, 4]), zero)
-                dy = max(max(vis_box32[v, 1] - q1, q1 - vis_box32[v, 5]), zero)
-                dz = max(max(vis_box32[v, 2] - q2, q2 - vis_box32[v, 6]), zero)
                 keep[m] = v
-                m += dx * dx + dy * dy + dz * dz <= rr32
+                m += box_d2(vis_box, v, p0, p1, p2) <= rr_exact
             for i in range(m):
                 n = _exact_pair(hot, lf, j, lm, typ, keep[i], vis_box, vis_rows, pair_obj,
                                 pair_p, n, model, w_obj, w_int)

@@ -120,11 +120,12 @@ class Scheduler(SceneAPI):
                                              g_f, dims)
         t = _lap(seconds, "order", t)
         nv = vis_rows.size
-        vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8),
-               self._scratch("vis_box32", nv * 8, np.float32)[:nv * 8].reshape(nv, 8),
-               vis_rows)
-        big_pos, ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of,
-                                       g_f, vis[:2])
+        ncell = int(dims[0] * dims[1] * dims[2])
+        n_small = int(cell_start[ncell])
+        vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8), vis_rows)
+        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of, n_small,
+                              vis[0])
+        big_pos = np.arange(n_small, nv, dtype=np.int32)
         grid = (g_f, dims, cell_start, ext, big_pos)
         if "pairs" not in plan:
             plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
