@@ -76,40 +76,21 @@ def freeze(frame: Frame) -> Frame:
     return frame
 
 
+def _empty(name: str, n: int, k: int, cascades: int) -> np.ndarray:
+    """One array of a frame where no object has a light (DESIGN section 3 empty slots)."""
+    dtype = FRAME_ARRAYS[name]
+    if name in _PER_OBJECT:
+        shape = (n,) if name in ("visible", "count", "candidates") else (n, k)
+        return np.full(shape, _PER_OBJECT[name], dtype)
+    if name == "cascade_splits":
+        return np.zeros((0, cascades + 1), dtype)
+    return np.zeros(1 if name == "caster_offsets" else 0, dtype)
+
+
 def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
     """A frame where no object has a light (empty slots as DESIGN section 3 defines them),
     except for the arrays ``given``, which are taken as they are (not copied)."""
-    n = object_id.size
-    if given:
-        empty = empty_frame(np.zeros(0, np.int32), k, cascades)
-        fields = {name: given.get(name) for name in FRAME_ARRAYS}
-        for name, arr in fields.items():
-            if arr is None:
-                arr = getattr(empty, name)
-                if arr.ndim and arr.shape[0] == 0 and name in _PER_OBJECT:
-                    fill = _PER_OBJECT[name]
-                    arr = np.full((n,) + arr.shape[1:], fill, arr.dtype)
-                fields[name] = arr
-        if "object_id" not in given:
-            fields["object_id"] = object_id.astype(np.int32, copy=True)
-        return Frame(**fields)
-    return Frame(
-        object_id=object_id.astype(np.int32, copy=True),
-        visible=np.zeros(n, np.bool_),
-        count=np.zeros(n, np.int32),
-        candidates=np.zeros(n, np.int32),
-        light_ids=np.full((n, k), -1, np.int32),
-        light_index=np.full((n, k), -1, np.int32),
-        priority=np.zeros((n, k), np.float32),
-        fade_weight=np.zeros((n, k), np.float32),
-        fade_state=np.zeros((n, k), np.uint8),
-        slot_shadow=np.full((n, k), -1, np.int8),
-        directional_lights=np.zeros(0, np.int32),
-        visible_lights=np.zeros(0, np.int32),
-        shadow_lights=np.zeros(0, np.int32),
-        shadow_tier=np.zeros(0, np.uint16),
-        cascade_splits=np.zeros((0, cascades + 1), np.float64),
-        caster_offsets=np.zeros(1, np.int64),
-        caster_ids=np.zeros(0, np.int32),
-        caster_masks=np.zeros(0, np.uint32),
-    )
+    fields = {name: given[name] if name in given else _empty(name, object_id.size, k, cascades)
+              for name in FRAME_ARRAYS if name != "object_id"}
+    return Frame(object_id=given.get("object_id", object_id.astype(np.int32, copy=True)),
+                 **fields)

@@ -113,8 +113,9 @@ class Scheduler(SceneAPI):
             g_f, dims = grid_shape(b[:3], b[3:], 2.0 * max(float(np.max(b[3:] - b[:3])), 1.0))
             plan.setdefault("pairs", f"brute force ({rows.size} lights x {n_vis} objects)")
         else:
-            g_f, dims = grid_shape(b[:3], b[3:],
-                                   CELL_PER_RADIUS * float(np.median(lights.radius[point_rows])))
+            radii = lights.radius[point_rows]
+            median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
+            g_f, dims = grid_shape(b[:3], b[3:], CELL_PER_RADIUS * median)
         t = _lap(seconds, "grid", t)
         vis_rows, pos_of, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
                                              g_f, dims)
