@@ -35,43 +35,36 @@ class CameraFrames:
     """
 
     def __init__(self, cameras: list[Camera]) -> None:
-        c = len(cameras)
-        self.basis = np.zeros((c, 3, 3))
-        self.tan_xy = np.zeros((c, 2))
-        self.position = np.zeros((c, 3))
-        self.plane_n = np.zeros((c, 6, 3))
-        self.plane_p = np.zeros((c, 6, 3))
-        self.focus = np.zeros((c, 2))
-        self.height_px = np.zeros(c)
-        self.near_far = np.zeros((c, 2))
-        for k, cam in enumerate(cameras):
-            p = tuple(float(x) for x in cam.position)
-            f = _normalize(tuple(float(x) for x in cam.forward))
-            r = _normalize(_cross(f, tuple(float(x) for x in cam.up)))
+        # Plain floats, then one array per field: a frame builds these every call, and
+        # numpy's per-call cost would dominate three-element vectors.
+        basis, tan_xy, position, plane_n, plane_p = [], [], [], [], []
+        for cam in cameras:
+            p = tuple(cam.position.tolist())
+            f = _normalize(tuple(cam.forward.tolist()))
+            r = _normalize(_cross(f, tuple(cam.up.tolist())))
             u = _cross(r, f)
             t_y = math.tan(cam.fov_y / 2)
             t_x = cam.aspect * t_y
             sx = math.sqrt(1 + t_x * t_x)
             sy = math.sqrt(1 + t_y * t_y)
-            near_pt = tuple(p[i] + cam.near * f[i] for i in range(3))
-            far_pt = tuple(p[i] + cam.far * f[i] for i in range(3))
-            planes = (
-                (f, near_pt),
-                (tuple(-f[i] for i in range(3)), far_pt),
-                (tuple((r[i] + t_x * f[i]) / sx for i in range(3)), p),
-                (tuple((-r[i] + t_x * f[i]) / sx for i in range(3)), p),
-                (tuple((u[i] + t_y * f[i]) / sy for i in range(3)), p),
-                (tuple((-u[i] + t_y * f[i]) / sy for i in range(3)), p),
-            )
-            for j, (n, q) in enumerate(planes):
-                self.plane_n[k, j] = n
-                self.plane_p[k, j] = q
-            self.basis[k] = (f, r, u)
-            self.tan_xy[k] = (t_x, t_y)
-            self.position[k] = p
-            self.focus[k] = (float(cam.focus[0]), float(cam.focus[1]))
-            self.height_px[k] = cam.height_px
-            self.near_far[k] = (cam.near, cam.far)
+            plane_n.append((f, tuple(-f[i] for i in range(3)),
+                            tuple((r[i] + t_x * f[i]) / sx for i in range(3)),
+                            tuple((-r[i] + t_x * f[i]) / sx for i in range(3)),
+                            tuple((u[i] + t_y * f[i]) / sy for i in range(3)),
+                            tuple((-u[i] + t_y * f[i]) / sy for i in range(3))))
+            plane_p.append((tuple(p[i] + cam.near * f[i] for i in range(3)),
+                            tuple(p[i] + cam.far * f[i] for i in range(3)), p, p, p, p))
+            basis.append((f, r, u))
+            tan_xy.append((t_x, t_y))
+            position.append(p)
+        self.basis = np.array(basis)
+        self.tan_xy = np.array(tan_xy)
+        self.position = np.array(position)
+        self.plane_n = np.array(plane_n)
+        self.plane_p = np.array(plane_p)
+        self.focus = np.array([(float(c.focus[0]), float(c.focus[1])) for c in cameras])
+        self.height_px = np.array([float(c.height_px) for c in cameras])
+        self.near_far = np.array([(float(c.near), float(c.far)) for c in cameras])
 
     def __len__(self) -> int:
         return self.position.shape[0]

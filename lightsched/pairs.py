@@ -77,15 +77,17 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
     cells of edge ``cell`` (grown until there are at most MAX_CELLS), cut RUN_SPLIT times
     finer along z: a column of cells is one run of objects whatever its cell count, so a
     finer z trims each run to the light's chord at no cost per column."""
-    extent = np.maximum(hi - lo, 0.0)
-    h = max(cell, float(extent.max()) / (MAX_CELLS / RUN_SPLIT) ** (1 / 3) * 1.0001, 1e-300)
+    extent = [max(float(hi[a]) - float(lo[a]), 0.0) for a in range(3)]
+    h = max(cell, max(extent) / (MAX_CELLS / RUN_SPLIT) ** (1 / 3) * 1.0001, 1e-300)
     while True:
-        edge = np.array([h, h, h / RUN_SPLIT])
-        dims = np.maximum(np.ceil(extent / edge), 1).astype(np.int64)
-        if int(np.prod(dims)) <= MAX_CELLS:
+        edge = (h, h, h / RUN_SPLIT)
+        dims = [max(math.ceil(extent[a] / edge[a]), 1) for a in range(3)]
+        if dims[0] * dims[1] * dims[2] <= MAX_CELLS:
             break
         h *= 1.25
-    return np.concatenate([lo.astype(np.float64), 1.0 / edge]), dims
+    g_f = np.array([float(lo[0]), float(lo[1]), float(lo[2]),
+                    1.0 / edge[0], 1.0 / edge[1], 1.0 / edge[2]])
+    return g_f, np.array(dims, np.int64)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
