@@ -241,9 +241,9 @@ def _slab_d2(p, cell, origin, h, dim, ext_a):
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def light_bounds(hot, rows, grid, n_vis):
-    """Upper bound of the pairs each light in ``rows`` can emit (objects centred in the
-    cells of its widened cube plus the big objects; every visible object for a
-    directional light)."""
+    """Offsets [len(rows) + 1] of each light's segment in the pair buffers: the prefix sum
+    of an upper bound of the pairs it can emit (objects centred in the cells of its
+    widened cube plus the big objects; every visible object for a directional light)."""
     g_f, dims, cell_start, ext, big_pos = grid
     out = np.zeros(rows.shape[0], np.int64)
     for t in nb.prange(rows.shape[0]):
@@ -259,7 +259,10 @@ def light_bounds(hot, rows, grid, n_vis):
                 base = (x * dims[1] + y) * dims[2]
                 total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
         out[t] = total
-    return out
+    offsets = np.zeros(rows.shape[0] + 1, np.int64)
+    for t in range(rows.shape[0]):
+        offsets[t + 1] = offsets[t] + out[t]
+    return offsets
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -136,9 +136,7 @@ class Scheduler(SceneAPI):
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
         rows = light_order(hot, rows, g_f, dims)
-        bounds = light_bounds(hot, rows, grid, n_vis)
-        offsets = np.zeros(rows.size + 1, np.int64)
-        np.cumsum(bounds, out=offsets[1:])
+        offsets = light_bounds(hot, rows, grid, n_vis)
         pair_obj = self._scratch("pair_obj", int(offsets[-1]), np.int32)
         pair_p = self._scratch("pair_p", int(offsets[-1]), np.float64)
         count = light_pass((hot, lf), rows, grid, vis, offsets,
@@ -199,7 +197,7 @@ class Scheduler(SceneAPI):
                 "lights": len(lights),
                 "visible_lights": int(np.count_nonzero(vis_l)),
                 "competing_lights": int(np.count_nonzero(compete)),
-                "pairs": int(frame.candidates.sum()),
+                "pairs": n_pairs,
                 "pair_bound": int(offsets[-1]),
                 "slots": int(frame.count.sum()),
                 "threads": nb.get_num_threads(),
