@@ -69,31 +69,38 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def berka_eccentricity(v0, v1, v2, d_viewer, r, basis, tan_xy, focus, c1):
+    """Berka's eccentricity f (DESIGN section 2, "thesis"; shadow importance uses it too)
+    of a light at v = p - camera position, d_viewer = |v|: 1 if d_viewer <= r, else
+    1 if theta <= alpha, else exp(-(theta - alpha)/c1), alpha = asin(min(1, r/d_viewer)),
+    theta = atan2(|g x v|, g . v), g the focal ray f + (x t_x) r + (y t_y) u."""
+    if d_viewer <= r:
+        return 1.0
+    sx = focus[0] * tan_xy[0]
+    sy = focus[1] * tan_xy[1]
+    g0 = basis[0, 0] + sx * basis[1, 0] + sy * basis[2, 0]
+    g1 = basis[0, 1] + sx * basis[1, 1] + sy * basis[2, 1]
+    g2 = basis[0, 2] + sx * basis[1, 2] + sy * basis[2, 2]
+    x0 = g1 * v2 - g2 * v1
+    x1 = g2 * v0 - g0 * v2
+    x2 = g0 * v1 - g1 * v0
+    theta = math.atan2(math.sqrt(x0 * x0 + x1 * x1 + x2 * x2), g0 * v0 + g1 * v1 + g2 * v2)
+    alpha = math.asin(min(1.0, r / d_viewer))
+    return 1.0 if theta <= alpha else math.exp(-(theta - alpha) / c1)
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
     """w_ecc f + w_dist d_viewer for one camera (Eriksson eq. 3.1, Berka's eccentricity).
 
     The rest of eq. 3.1 does not depend on the camera and rounding is monotone, so the
     max over cameras of the whole sum equals the sum built on the max of this term.
-    theta = atan2(|g x v|, g . v), g the focal ray f + (x t_x) r + (y t_y) u.
     """
     v0 = p[0] - cam_p[0]
     v1 = p[1] - cam_p[1]
     v2 = p[2] - cam_p[2]
     d_viewer = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    if d_viewer <= r:
-        f = 1.0
-    else:
-        sx = focus[0] * tan_xy[0]
-        sy = focus[1] * tan_xy[1]
-        g0 = basis[0, 0] + sx * basis[1, 0] + sy * basis[2, 0]
-        g1 = basis[0, 1] + sx * basis[1, 1] + sy * basis[2, 1]
-        g2 = basis[0, 2] + sx * basis[1, 2] + sy * basis[2, 2]
-        x0 = g1 * v2 - g2 * v1
-        x1 = g2 * v0 - g0 * v2
-        x2 = g0 * v1 - g1 * v0
-        theta = math.atan2(math.sqrt(x0 * x0 + x1 * x1 + x2 * x2), g0 * v0 + g1 * v1 + g2 * v2)
-        alpha = math.asin(min(1.0, r / d_viewer))
-        f = 1.0 if theta <= alpha else math.exp(-(theta - alpha) / c1)
+    f = berka_eccentricity(v0, v1, v2, d_viewer, r, basis, tan_xy, focus, c1)
     return w_ecc * f + w_dist * d_viewer
 
 

@@ -10,9 +10,10 @@ Decisions taken where DESIGN is silent (the fast path makes the same ones):
 
 - ``visible_lights`` lists every visible light (directional always), whatever the masks and
   the unshadowed rule.
-- Shadows are not implemented yet: no shadow lights, no casters, ``slot_shadow`` all -1, so
-  with ``unshadowed="skip"`` every light with ``shadows=True`` affects nothing.
-  ``cascade_splits`` is computed.
+- Shadowed lights, tiers and ``slot_shadow`` follow DESIGN; casters are not built yet
+  (empty). Directional candidates rank among themselves by i + p_user, raised by the same
+  hysteresis as the others when shadowed last frame. 2^ceil(log2 s) is evaluated exactly
+  (math.frexp). ``cascade_splits`` is computed.
 - Directional lights are ranked by P = i + p_user whatever the masks; with
   ``directional_in_slots`` they compete for slots instead (masks apply).
 - Hysteresis looks at last frame's selected set, including selected lights that waited
@@ -280,6 +281,39 @@ def thesis_priority(lt: _Light, ob: _Object, cams: list[CameraFrame], cfg: Confi
     return best + lt.p_user
 
 
+def _eccentricity(cam: CameraFrame, p: Vec, r: float, d_viewer: float, c1: float) -> float:
+    """Berka's eccentricity f of DESIGN section 2 ("thesis")."""
+    if d_viewer <= r:
+        return 1.0
+    v = (p[0] - cam.position[0], p[1] - cam.position[1], p[2] - cam.position[2])
+    alpha = math.asin(min(1.0, r / d_viewer))
+    theta = math.atan2(_length(_cross(cam.g, v)), _dot(cam.g, v))
+    return 1.0 if theta <= alpha else math.exp(-(theta - alpha) / c1)
+
+
+def shadow_importance(lt: _Light, cams: list[CameraFrame], c1: float) -> tuple[float, float]:
+    """(importance, s_max) of a point or spot light (DESIGN section 2, "Shadowed lights"):
+    s = height_px r / (max(d_viewer, r) t_y), importance = i min(1, s/height_px)^2 f +
+    p_user, each the max over cameras."""
+    best, s_max = -math.inf, 0.0
+    for cam in cams:
+        p, e = lt.position, cam.position
+        v = (p[0] - e[0], p[1] - e[1], p[2] - e[2])
+        d_viewer = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        s = cam.height_px * lt.radius / (max(d_viewer, lt.radius) * cam.t_y)
+        m = min(1.0, s / cam.height_px)
+        f = _eccentricity(cam, p, lt.radius, d_viewer, c1)
+        best = max(best, lt.intensity * m * m * f + lt.p_user)
+        s_max = max(s_max, s)
+    return best, s_max
+
+
+def pow2_ceil(x: float) -> float:
+    """2^ceil(log2 x) for x > 0, exactly."""
+    m, e = math.frexp(x)
+    return math.ldexp(1.0, e - 1 if m == 0.5 else e)
+
+
 def _by_priority(items: dict[int, float]) -> list[int]:
     """Light ids by value descending, ties to the lower id."""
     return sorted(items, key=lambda lid: (-items[lid], lid))
@@ -303,6 +337,7 @@ class Scheduler(SceneAPI):
     def __init__(self, config: Config | None = None) -> None:
         super().__init__(config)
         self._state: dict[int, _ObjectState] = {}
+        self._shadowed: dict[int, int] = {}  # light id -> tier, last frame's shadow lights
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()
@@ -329,8 +364,44 @@ class Scheduler(SceneAPI):
         object_visible = [any(aabb_in_planes(cam.planes, ob.lo, ob.hi) for cam in cams)
                           for ob in objects]
 
-        # No shadow lights yet: with "skip", every shadowed light affects nothing.
-        skipped = [cfg.unshadowed == "skip" and lt.shadows for lt in lights]
+        # Shadowed lights: visible, shadows = true, affecting a visible object (Affects
+        # without the unshadowed rule); ranked by importance with hysteresis, directional
+        # lights first.
+        h = cfg.hysteresis
+        keys_dir: dict[int, float] = {}
+        keys_other: dict[int, float] = {}
+        s_max_of: dict[int, float] = {}
+        for lt in lights:
+            if not (lt.shadows and light_visible[lt.row]):
+                continue
+            if not any(object_visible[ob.row] and lt.mask & ob.mask
+                       and (lt.type == DIRECTIONAL or affects_geometry(lt, ob) is not None)
+                       for ob in objects):
+                continue
+            if lt.type == DIRECTIONAL:
+                imp = lt.intensity + lt.p_user
+            else:
+                imp, s_max_of[lt.id] = shadow_importance(lt, cams, cfg.c1)
+            if lt.id in self._shadowed:
+                imp = imp + h * abs(imp) + cfg.hysteresis_abs
+            (keys_dir if lt.type == DIRECTIONAL else keys_other)[lt.id] = imp
+        shadow_ids = (_by_priority(keys_dir) + _by_priority(keys_other))[:cfg.shadow_budget]
+        tiers = []
+        for lid in shadow_ids:
+            if lid in keys_dir:
+                tiers.append(4096)
+                continue
+            s_max = s_max_of[lid]
+            tier = int(min(max(pow2_ceil(s_max), 256.0), 4096.0))
+            prev = self._shadowed.get(lid)
+            if prev is not None and prev / (2 * (1 + h)) <= s_max <= prev * (1 + h):
+                tier = prev
+            tiers.append(tier)
+        self._shadowed = dict(zip(shadow_ids, tiers, strict=True))
+        shadow_index = {lid: k for k, lid in enumerate(shadow_ids)}
+        # With "skip", a shadowed light that did not get a shadow map affects nothing.
+        skipped = [cfg.unshadowed == "skip" and lt.shadows and lt.id not in shadow_index
+                   for lt in lights]
 
         directional = {}
         if not cfg.directional_in_slots:
@@ -426,6 +497,11 @@ class Scheduler(SceneAPI):
             out.sort(key=lambda s: (-s[1], s[0]))
             ordered = lit + out
             frame.count[ob.row] = len(ordered)
+            # slot_shadow: up to max_shadowed_per_object shadowed slots, by weight, then
+            # output order (fading-out slots still sample their map).
+            shadowed = [(-w, j) for j, (lid, w, _) in enumerate(ordered) if lid in shadow_index]
+            for _, j in sorted(shadowed)[:cfg.max_shadowed_per_object]:
+                frame.slot_shadow[ob.row, j] = shadow_index[ordered[j][0]]
             for j, (lid, weight, state) in enumerate(ordered):
                 frame.light_ids[ob.row, j] = lid
                 frame.light_index[ob.row, j] = row_of[lid]
@@ -434,6 +510,9 @@ class Scheduler(SceneAPI):
                 frame.fade_state[ob.row, j] = state
 
         frame.directional_lights = np.array(directional_ids, dtype=np.int32)
+        frame.shadow_lights = np.array(shadow_ids, dtype=np.int32)
+        frame.shadow_tier = np.array(tiers, dtype=np.uint16)
+        frame.caster_offsets = np.zeros(len(shadow_ids) + 1, np.int64)
         frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
                                         dtype=np.int32)
         frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],

@@ -35,6 +35,7 @@ from .pairs import (
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, Camera, Config, SceneAPI
+from .shadows import rank_shadow_lights, slot_shadow
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -60,6 +61,8 @@ class Scheduler(SceneAPI):
         self.objects.add_state("was_visible", (), np.bool_, False)
         self._buffers: dict[str, np.ndarray] = {}
         self._spare_state: tuple[np.ndarray, ...] | None = None
+        # Last frame's shadow lights (ids) and their tiers, for the two hystereses.
+        self._shadow_prev = (np.zeros(0, np.int32), np.zeros(0, np.int64))
 
     def _scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
         """A reusable buffer of at least ``size`` elements (grown by half when short), so a
@@ -90,15 +93,9 @@ class Scheduler(SceneAPI):
 
         hot, lf = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
         is_dir = lights.type == DIRECTIONAL
-        # Shadow stage not built yet: shadow_lights is empty, so "skip" drops every
-        # light that may cast shadows (DESIGN section 2, Affects).
-        removed = lights.shadows if cfg.unshadowed == "skip" else np.zeros(len(lights), bool)
-        live = vis_l & ~removed
-        compete = live & (~is_dir if not cfg.directional_in_slots else True)
-        dir_rows = np.flatnonzero(live & is_dir) if not cfg.directional_in_slots else \
-            np.zeros(0, np.int64)
-        dir_p = lights.intensity[dir_rows] + lights.priority[dir_rows]
-        directional = lights.id[dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]]
+        # Pairs are found for every visible light: the shadow ranking needs to know which
+        # shadowed lights affect a visible object before "skip" removes the others.
+        compete = vis_l & (~is_dir if not cfg.directional_in_slots else True)
         t = _lap(seconds, "pack", t)
 
         rows = np.flatnonzero(compete).astype(np.int32)
@@ -142,6 +139,31 @@ class Scheduler(SceneAPI):
         count = light_pass((hot, lf), rows, grid, vis, offsets,
                            pair_obj, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
         t = _lap(seconds, "pairs", t)
+
+        # Shadowed lights (DESIGN section 2): candidates affect a visible object.
+        affects = np.zeros(len(lights), bool)
+        affects[rows] = count > 0
+        sun = is_dir & vis_l & lights.shadows & ~compete
+        if sun.any():
+            seen = np.bitwise_or.reduce(objs.mask[vis_o]) if n_vis else np.uint32(0)
+            affects[sun] = (lights.mask[sun] & seen) != 0
+        candidate = vis_l & lights.shadows & affects
+        shadow_rows, shadow_tier = rank_shadow_lights(
+            lights, frames, candidate, self._shadow_prev[0], self._shadow_prev[1],
+            cfg.shadow_budget, cfg.hysteresis, cfg.hysteresis_abs, cfg.c1)
+        shadow_of_row = np.full(len(lights), -1, np.int8)
+        shadow_of_row[shadow_rows] = np.arange(shadow_rows.size)
+        live = vis_l.copy()
+        if cfg.unshadowed == "skip":
+            # A shadowed light without a shadow map affects nothing (it would leak
+            # through walls): its pairs are dropped before grouping.
+            live &= ~(lights.shadows & (shadow_of_row < 0))
+            count[~live[rows]] = 0
+        dir_rows = np.flatnonzero(live & is_dir) if not cfg.directional_in_slots else \
+            np.zeros(0, np.int64)
+        dir_p = lights.intensity[dir_rows] + lights.priority[dir_rows]
+        directional = lights.id[dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]]
+        t = _lap(seconds, "shadows", t)
         n, n_pairs = len(objs), int(count.sum())
         lists = (self._scratch("start", n + 1, np.int64)[:n + 1],
                  self._scratch("obj_pairs", 2 * n_pairs, np.float64)[:2 * n_pairs]
@@ -165,6 +187,11 @@ class Scheduler(SceneAPI):
         params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
                            _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
         object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params)
+        if shadow_rows.size and cfg.max_shadowed_per_object:
+            slot_map = slot_shadow(out[1], state_out[0], out[5], shadow_of_row,
+                                   cfg.max_shadowed_per_object)
+        else:
+            slot_map = np.full((n, k), -1, np.int8)
         t = _lap(seconds, "objects", t)
 
         for (name, _), arr in zip(_KEPT, state_out, strict=True):
@@ -177,16 +204,20 @@ class Scheduler(SceneAPI):
             objs.id, k, cfg.cascades, visible=vis_o.copy(), count=out[5], candidates=out[6],
             light_ids=out[0], light_index=out[1], priority=out[2], fade_weight=out[3],
             fade_state=out[4], directional_lights=directional.astype(np.int32),
-            visible_lights=lights.id[vis_l], cascade_splits=splits)
+            visible_lights=lights.id[vis_l], cascade_splits=splits, slot_shadow=slot_map,
+            shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
+            caster_offsets=np.zeros(shadow_rows.size + 1, np.int64))
         freeze(frame)
-        has_shadowed = bool(np.any(lights.shadows & vis_l))
+        self._shadow_prev = (lights.id[shadow_rows], shadow_tier.astype(np.int64))
         plan["visibility"] = f"frustum planes, {len(cameras)} camera(s)"
         plan["priority"] = cfg.model + " (exact float64)"
         if cfg.precision == "fast":
             plan["priority"] += "; precision 'fast' not built yet, ran exact"
         plan["fade"] = "fused with selection in the object pass"
-        plan["shadows"] = ("skipped: shadow stage not built yet" if has_shadowed
-                           else "skipped: no visible shadowed light")
+        plan["shadows"] = (f"{shadow_rows.size} of {int(candidate.sum())} candidates shadowed "
+                           "(ranking, tiers, slot_shadow); caster lists not built yet"
+                           if candidate.any() else "skipped: no visible shadowed light "
+                           "affects a visible object")
         t = _lap(seconds, "output", t)
         seconds["total"] = sum(seconds.values())
         frame.stats = {

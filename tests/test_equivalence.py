@@ -102,8 +102,11 @@ def camera_list(draw) -> list[ls.Camera]:
 
 @st.composite
 def configs(draw) -> ls.Config:
+    k = draw(st.one_of(st.sampled_from([1, 2, 2, 3]), st.integers(1, 8)))
     return ls.Config(
-        max_lights=draw(st.one_of(st.sampled_from([1, 2, 2, 3]), st.integers(1, 8))),
+        max_lights=k,
+        shadow_budget=draw(st.sampled_from([0, 1, 2, 4, 4, 127])),
+        max_shadowed_per_object=draw(st.integers(0, min(k, 3))),
         model=draw(st.sampled_from(["contribution", "thesis"])),
         hysteresis=draw(st.sampled_from([0.0, 0.1, 0.5])),
         hysteresis_abs=draw(st.sampled_from([0.0, 0.0, 0.05])),

@@ -310,7 +310,16 @@ def test_unshadowed_skip():
     obj = objects(box((0, 0, 10), (0, 0, 0)))
     f = ref.schedule(lights, obj, [CAM])
     assert sorted(slots(f, 0)) == [0, 1] and f.directional_lights.tolist() == [2]
+    # Both shadowed lights get a map (directional first): "skip" removes nothing.
     f = ref.schedule(lights, obj, [CAM], Config(unshadowed="skip"))
+    assert f.shadow_lights.tolist() == [2, 0] and f.shadow_tier[0] == 4096
+    assert sorted(slots(f, 0)) == [0, 1] and f.directional_lights.tolist() == [2]
+    # One map: the sun keeps it, the shadowed point light affects nothing.
+    f = ref.schedule(lights, obj, [CAM], Config(unshadowed="skip", shadow_budget=1))
+    assert f.shadow_lights.tolist() == [2]
+    assert slots(f, 0) == [1] and f.directional_lights.tolist() == [2]
+    # No maps: both shadowed lights are dropped.
+    f = ref.schedule(lights, obj, [CAM], Config(unshadowed="skip", shadow_budget=0))
     assert slots(f, 0) == [1] and f.directional_lights.tolist() == []
     assert f.visible_lights.tolist() == [0, 1, 2]
     assert f.shadow_lights.tolist() == [] and f.caster_offsets.tolist() == [0]
