@@ -54,6 +54,7 @@ from .select import (
     I_ROWS,
     topk_insert,
 )
+from .shadows import pick_slot_shadows
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -455,7 +456,7 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def object_pass(objs, lists, ids, state_in, state_out, out, params):
+def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
     """For every object (parallel, rows in order): top-K with hysteresis, fade, outputs.
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
@@ -470,7 +471,8 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
     start, obj_pairs = lists
     s_id, s_w, s_st, s_sel = state_in
     n_w, n_sel = state_out
-    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand = out
+    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow = out
+    shadow_of_row, max_shadowed = shadow
     h = params[0]
     h_abs = params[1]
     inc = params[2]
@@ -528,3 +530,4 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params):
                 n_sel[o, m] = si[I_ID, m] if m < nbest else -1
             o_count[o] = cnt
             o_cand[o] = cand
+            pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)

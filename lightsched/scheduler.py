@@ -35,7 +35,7 @@ from .pairs import (
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, Camera, Config, SceneAPI
-from .shadows import rank_shadow_lights, slot_shadow
+from .shadows import rank_shadow_lights
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -183,15 +183,12 @@ class Scheduler(SceneAPI):
             state_out = tuple(np.empty((n, k), dtype) for _, dtype in _KEPT)
         out = (np.empty((n, k), np.int32), np.empty((n, k), np.int32),
                np.empty((n, k), np.float32), np.empty((n, k), np.float32),
-               np.empty((n, k), np.uint8), np.empty(n, np.int32), np.empty(n, np.int32))
+               np.empty((n, k), np.uint8), np.empty(n, np.int32), np.empty(n, np.int32),
+               np.empty((n, k), np.int8))
         params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
                            _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
-        object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params)
-        if shadow_rows.size and cfg.max_shadowed_per_object:
-            slot_map = slot_shadow(out[1], state_out[0], out[5], shadow_of_row,
-                                   cfg.max_shadowed_per_object)
-        else:
-            slot_map = np.full((n, k), -1, np.int8)
+        object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params,
+                    (shadow_of_row, cfg.max_shadowed_per_object))
         t = _lap(seconds, "objects", t)
 
         for (name, _), arr in zip(_KEPT, state_out, strict=True):
@@ -204,7 +201,7 @@ class Scheduler(SceneAPI):
             objs.id, k, cfg.cascades, visible=vis_o.copy(), count=out[5], candidates=out[6],
             light_ids=out[0], light_index=out[1], priority=out[2], fade_weight=out[3],
             fade_state=out[4], directional_lights=directional.astype(np.int32),
-            visible_lights=lights.id[vis_l], cascade_splits=splits, slot_shadow=slot_map,
+            visible_lights=lights.id[vis_l], cascade_splits=splits, slot_shadow=out[7],
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
             caster_offsets=np.zeros(shadow_rows.size + 1, np.int64))
         freeze(frame)

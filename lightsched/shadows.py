@@ -1,5 +1,6 @@
 """Shadowed lights: ranking, resolution tiers and slot_shadow (DESIGN section 2, "Shadowed
 lights" and "slot_shadow"). Caster lists are not built yet (issue 3).
+slot_shadow's rule (pick_slot_shadows) is inlined into pairs.object_pass.
 
 Takes the packed lights and cameras, which lights are candidates (visible, shadows = true,
 affecting a visible object: pairs.py counts that) and last frame's shadowed lights with
@@ -17,6 +18,7 @@ import numpy as np
 from .frustum import CameraFrames
 from .priority import berka_eccentricity
 from .scene import DIRECTIONAL
+from .select import F_NEW_W, I_NEW_ROW
 
 MIN_TIER, MAX_TIER = 256, 4096
 
@@ -70,38 +72,47 @@ def rank_shadow_lights(lights: object, frames: CameraFrames, candidate: np.ndarr
         key[~is_dir], s_max[~is_dir] = _importance(other, lights.position, lights.radius,
                                                    lights.intensity, lights.priority, cams, c1)
     ids = lights.id[rows]
-    before = np.isin(ids, prev_ids)
-    key[before] = key[before] + h * np.abs(key[before]) + h_abs
+    if prev_ids.size:
+        prev_sorted = np.sort(prev_ids)
+        at = np.minimum(np.searchsorted(prev_sorted, ids), prev_sorted.size - 1)
+        before = prev_sorted[at] == ids
+        key[before] = key[before] + h * np.abs(key[before]) + h_abs
     order = np.lexsort((rows, -key, ~is_dir))[:budget]
-    chosen, s_max, is_dir = rows[order], s_max[order], is_dir[order]
-    mant, expo = np.frexp(np.where(is_dir, 1.0, s_max))
-    tier = np.clip(np.ldexp(1.0, np.where(mant == 0.5, expo - 1, expo)), MIN_TIER, MAX_TIER)
+    chosen = rows[order]
+    # At most S (<= 127) lights: plain Python, exact 2^ceil(log2 s) by frexp.
     prev = dict(zip(prev_ids.tolist(), prev_tiers.tolist(), strict=True))
-    for t, lid in enumerate(lights.id[chosen].tolist()):
-        if is_dir[t]:
+    tier = np.empty(chosen.size, np.uint16)
+    for t, (lid, directional, s) in enumerate(zip(lights.id[chosen].tolist(),
+                                                   is_dir[order].tolist(),
+                                                   s_max[order].tolist(), strict=True)):
+        if directional:
             tier[t] = MAX_TIER
-        elif lid in prev and prev[lid] / (2 * (1 + h)) <= s_max[t] <= prev[lid] * (1 + h):
-            tier[t] = prev[lid]
-    return chosen.astype(np.int32), tier.astype(np.uint16)
+            continue
+        mant, expo = math.frexp(s)
+        value = int(min(max(math.ldexp(1.0, expo - 1 if mant == 0.5 else expo), MIN_TIER),
+                        MAX_TIER))
+        if lid in prev and prev[lid] / (2 * (1 + h)) <= s <= prev[lid] * (1 + h):
+            value = prev[lid]
+        tier[t] = value
+    return chosen.astype(np.int32), tier
 
 
-@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def slot_shadow(light_index, weight, count, shadow_of_row, max_per_object):
-    """slot_shadow [N, K] int8: for at most max_per_object of an object's slots whose light
-    has a shadow map, chosen by fade weight descending, then output order, the index of
-    that map in shadow_lights; -1 elsewhere. Fading-out slots count: the shader still
-    samples them."""
-    n, k = light_index.shape
-    out = np.full((n, k), -1, np.int8)
-    for o in nb.prange(n):
-        for _ in range(max_per_object):
-            best = -1
-            for m in range(count[o]):
-                if out[o, m] >= 0 or shadow_of_row[light_index[o, m]] < 0:
-                    continue
-                if best < 0 or weight[o, m] > weight[o, best]:
-                    best = m
-            if best < 0:
-                break
-            out[o, best] = shadow_of_row[light_index[o, best]]
-    return out
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
+    """slot_shadow of one object: for at most max_per_object of its slots whose light has a
+    shadow map, chosen by fade weight descending, then output order, the index of that map
+    in shadow_lights; -1 elsewhere. Fading-out slots count: the shader still samples them.
+    Reads the object's new slots (F_NEW_W, I_NEW_ROW of select.py, in output order) and
+    writes row o of out [N, K]; inlined into pairs.object_pass."""
+    for m in range(out.shape[1]):
+        out[o, m] = -1
+    for _ in range(max_per_object):
+        best = -1
+        for m in range(cnt):
+            if out[o, m] >= 0 or shadow_of_row[si[I_NEW_ROW, m]] < 0:
+                continue
+            if best < 0 or sf[F_NEW_W, m] > sf[F_NEW_W, best]:
+                best = m
+        if best < 0:
+            break
+        out[o, best] = shadow_of_row[si[I_NEW_ROW, best]]
