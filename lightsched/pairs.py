@@ -473,6 +473,7 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
     n_w, n_sel = state_out
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow = out
     shadow_of_row, max_shadowed = shadow
+    any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
     h = params[0]
     h_abs = params[1]
     inc = params[2]
@@ -520,6 +521,7 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                     o_prio[o, m] = np.float32(sf[F_NEW_P, m])
                     o_w[o, m] = np.float32(sf[F_NEW_W, m])
                     o_st[o, m] = si[I_NEW_ST, m]
+                    o_shadow[o, m] = -1
                 else:
                     n_w[o, m] = 0.0
                     o_ids[o, m] = -1
@@ -527,7 +529,9 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                     o_prio[o, m] = 0.0
                     o_w[o, m] = 0.0
                     o_st[o, m] = 0
+                    o_shadow[o, m] = -1
                 n_sel[o, m] = si[I_ID, m] if m < nbest else -1
             o_count[o] = cnt
             o_cand[o] = cand
-            pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
+            if any_shadow:
+                pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)

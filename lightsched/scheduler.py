@@ -141,16 +141,19 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "pairs", t)
 
         # Shadowed lights (DESIGN section 2): candidates affect a visible object.
-        affects = np.zeros(len(lights), bool)
-        affects[rows] = count > 0
-        sun = is_dir & vis_l & lights.shadows & ~compete
-        if sun.any():
-            seen = np.bitwise_or.reduce(objs.mask[vis_o]) if n_vis else np.uint32(0)
-            affects[sun] = (lights.mask[sun] & seen) != 0
-        candidate = vis_l & lights.shadows & affects
-        shadow_rows, shadow_tier = rank_shadow_lights(
-            lights, frames, candidate, self._shadow_prev[0], self._shadow_prev[1],
-            cfg.shadow_budget, cfg.hysteresis, cfg.hysteresis_abs, cfg.c1)
+        candidate = vis_l & lights.shadows
+        shadow_rows, shadow_tier = np.zeros(0, np.int32), np.zeros(0, np.uint16)
+        if candidate.any():
+            affects = np.zeros(len(lights), bool)
+            affects[rows] = count > 0
+            sun = is_dir & candidate & ~compete
+            if sun.any():
+                seen = np.bitwise_or.reduce(objs.mask[vis_o]) if n_vis else np.uint32(0)
+                affects[sun] = (lights.mask[sun] & seen) != 0
+            candidate &= affects
+            shadow_rows, shadow_tier = rank_shadow_lights(
+                lights, frames, candidate, self._shadow_prev[0], self._shadow_prev[1],
+                cfg.shadow_budget, cfg.hysteresis, cfg.hysteresis_abs, cfg.c1)
         shadow_of_row = np.full(len(lights), -1, np.int8)
         shadow_of_row[shadow_rows] = np.arange(shadow_rows.size)
         live = vis_l.copy()

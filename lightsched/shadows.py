@@ -103,9 +103,8 @@ def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
     shadow map, chosen by fade weight descending, then output order, the index of that map
     in shadow_lights; -1 elsewhere. Fading-out slots count: the shader still samples them.
     Reads the object's new slots (F_NEW_W, I_NEW_ROW of select.py, in output order) and
-    writes row o of out [N, K]; inlined into pairs.object_pass."""
-    for m in range(out.shape[1]):
-        out[o, m] = -1
+    writes row o of out [N, K], which the caller has filled with -1; inlined into
+    pairs.object_pass."""
     for _ in range(max_per_object):
         best = -1
         for m in range(cnt):
