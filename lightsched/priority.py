@@ -10,8 +10,8 @@ Packed lights, two float64 row arrays, so that a point light's whole pair comput
 reads one 64-byte record: ``light_hot[L, 8]``: 0-2 position, 3 radius, 4 mask, 5 code =
 row * 32 + type * 8, 6 intensity i, 7 user priority p_user (all exact in float64);
 ``light_f[L, 8]``: 0-2 axis (normalised direction), 3 cos(outer), 4 sin(outer),
-5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer
-get cos(inner) = NaN, which selects the step profile.
+5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer (or whose
+cosines round equal) get cos(inner) = NaN, which selects the step profile.
 """
 
 from __future__ import annotations
@@ -45,7 +45,9 @@ def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask,
         hot[j, 7] = prio[j]
         lf[j, 3] = math.cos(outer[j])
         lf[j, 4] = math.sin(outer[j])
-        lf[j, 5] = math.cos(inner[j]) if inner[j] != outer[j] else np.nan
+        cos_i = math.cos(inner[j])
+        # The step profile: inner == outer, or so close that the cosines are equal.
+        lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
         lf[j, 6] = ids[j]
         if typ[j] != DIRECTIONAL:
             best = -np.inf

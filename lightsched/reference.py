@@ -242,9 +242,12 @@ def spot_factor(lt: _Light, ob: _Object) -> float:
         n2 = n * n
         c = (a * root + R * _sqrt0(n2 - a * a)) / n2 if n2 > 0.0 else 1.0
     cos_o = math.cos(lt.outer)
-    if lt.inner == lt.outer:
+    cos_i = math.cos(lt.inner)
+    # inner == outer is DESIGN's step; so is inner a few ulps from outer, where the cosines
+    # round to the same value and the ramp would divide by zero.
+    if lt.inner == lt.outer or cos_i == cos_o:
         return 1.0 if c >= cos_o else 0.0
-    t = (c - cos_o) / (math.cos(lt.inner) - cos_o)
+    t = (c - cos_o) / (cos_i - cos_o)
     t = min(max(t, 0.0), 1.0)
     return t * t
 

@@ -458,3 +458,22 @@ def test_thread_count_does_not_matter():
         numba.set_num_threads(before)
     for i, (a, b) in enumerate(zip(*runs, strict=True)):
         frames_identical(a, b, f"frame {i}")
+
+
+def test_spot_whose_inner_and_outer_cosines_round_equal():
+    """inner a few ulps below outer: cos(inner) == cos(outer), so DESIGN's ramp would divide
+    by zero; both implementations take the step profile (as for inner == outer)."""
+    outer = 0.05
+    inner = float(np.nextafter(outer, 0.0))
+    assert inner != outer and math.cos(inner) == math.cos(outer)
+    lights = dict(id=[1, 2], type=[1, 1], position=[[0.0, 0.0, 10.0]] * 2, radius=[20.0] * 2,
+                  direction=[[0.0, 0.0, 1.0]] * 2, outer_angle=[outer] * 2,
+                  inner_angle=[inner, outer])
+    objs = dict(id=[0], bounds_min=[[-0.1, -0.1, 14.9]], bounds_max=[[0.1, 0.1, 15.1]])
+    cam = ls.Camera(position=[0, 0, 0], forward=[0, 0, 1], up=[0, 1, 0], fov_y=1.0, aspect=1.0,
+                    near=0.1, far=100.0)
+    fast = ls.schedule(lights, objs, [cam])
+    oracle = ref.schedule(lights, objs, [cam])
+    assert fast.light_ids[0, :2].tolist() == oracle.light_ids[0, :2].tolist() == [1, 2]
+    assert fast.priority[0, 0] == oracle.priority[0, 0] == oracle.priority[0, 1]
+    assert np.isfinite(fast.priority).all()
