@@ -92,5 +92,5 @@ def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> F
     except for the arrays ``given``, which are taken as they are (not copied)."""
     fields = {name: given[name] if name in given else _empty(name, object_id.size, k, cascades)
               for name in FRAME_ARRAYS if name != "object_id"}
-    return Frame(object_id=given.get("object_id", object_id.astype(np.int32, copy=True)),
-                 **fields)
+    ids = given["object_id"] if "object_id" in given else object_id.astype(np.int32, copy=True)
+    return Frame(object_id=ids, **fields)

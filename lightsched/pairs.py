@@ -52,6 +52,7 @@ from .select import (
     I_PREV_SEL,
     I_ROW,
     I_ROWS,
+    hysteresis_key,
     topk_insert,
 )
 from .shadows import pick_slot_shadows
@@ -443,16 +444,12 @@ def _match_old_slot(p, j, lid, sf, si):
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _select(p, j, ids, sf, si, nbest, h, h_abs):
-    """Offers light row j with priority p to the object's top K: hysteresis key, insert,
-    and this frame's P / row for the object's old slot of that light. Returns nbest.
-    (Fuses select.hysteresis_key with the old-slot lookup: one loop over K.)"""
+    """Offers light row j with priority p to the object's top K (select.py): hysteresis
+    key, insert, and this frame's P / row for the object's old slot of that light.
+    Returns nbest."""
     lid = np.int64(ids[j])
     _match_old_slot(p, j, lid, sf, si)
-    was = False
-    for m in range(sf.shape[1]):
-        was |= si[I_PREV_SEL, m] == lid
-    key = p + h * abs(p) + h_abs if was else p
-    return topk_insert(sf, si, nbest, key, lid, p, j)
+    return topk_insert(sf, si, nbest, hysteresis_key(p, lid, si, h, h_abs), lid, p, j)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -464,8 +461,9 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
     state_in = (slot ids, slot weights f64, slot states, selected ids), each [N, K] (the
     ids and states are last frame's light_ids and fade_state outputs); state_out =
     (slot weights f64, selected ids); out = (light_ids, light_index, priority f32,
-    fade_weight f32, fade_state, count, candidates); params = (h, h_abs, dt/fade_in,
-    dt/fade_out, fade_in, fade_out).
+    fade_weight f32, fade_state, count, candidates, slot_shadow int8); params = (h, h_abs,
+    dt/fade_in, dt/fade_out, fade_in, fade_out); shadow = (shadow map index per light row
+    or -1, max_shadowed_per_object).
     """
     visible, reset = objs
     start, obj_pairs = lists
@@ -501,11 +499,12 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                 if cand <= k:
                     # Every competing light is selected: no keys, no ranking to keep.
                     for t in range(cand):
+                        p = obj_pairs[start[o] + t, 0]
                         j = np.int64(obj_pairs[start[o] + t, 1])
-                        _match_old_slot(obj_pairs[start[o] + t, 0], j, np.int64(ids[j]),
-                                        sf, si)
-                        sf[F_P, t] = obj_pairs[start[o] + t, 0]
-                        si[I_ID, t] = ids[j]
+                        lid = np.int64(ids[j])
+                        _match_old_slot(p, j, lid, sf, si)
+                        sf[F_P, t] = p
+                        si[I_ID, t] = lid
                         si[I_ROW, t] = j
                     nbest = cand
                 else:
@@ -521,7 +520,6 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                     o_prio[o, m] = np.float32(sf[F_NEW_P, m])
                     o_w[o, m] = np.float32(sf[F_NEW_W, m])
                     o_st[o, m] = si[I_NEW_ST, m]
-                    o_shadow[o, m] = -1
                 else:
                     n_w[o, m] = 0.0
                     o_ids[o, m] = -1
@@ -529,7 +527,7 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                     o_prio[o, m] = 0.0
                     o_w[o, m] = 0.0
                     o_st[o, m] = 0
-                    o_shadow[o, m] = -1
+                o_shadow[o, m] = -1
                 n_sel[o, m] = si[I_ID, m] if m < nbest else -1
             o_count[o] = cnt
             o_cand[o] = cand

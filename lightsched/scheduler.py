@@ -178,8 +178,7 @@ class Scheduler(SceneAPI):
 
         reset = objs.is_new | ~objs.get("was_visible")
         if self.frame_index == 0 or cut:
-            reset = np.ones(len(objs), np.bool_)
-        n = len(objs)
+            reset = np.ones(n, np.bool_)
         state_in = tuple(objs.get(name) for name, _, _ in _STATE)
         state_out = self._spare_state
         if state_out is None or state_out[0].shape != (n, k):

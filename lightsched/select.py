@@ -30,17 +30,12 @@ I_ROWS = 11
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def hysteresis_key(p, lid, si, h, h_abs):
-    """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL).
-
-    pairs._select fuses a copy of this rule with the old-slot lookup (pairs._match_old_slot).
-    """
+    """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL, padded
+    with -1). Compares only in the loop, no early exit: it vectorises."""
+    was = False
     for m in range(si.shape[1]):
-        q = si[I_PREV_SEL, m]
-        if q < 0:
-            break
-        if q == lid:
-            return p + h * abs(p) + h_abs
-    return p
+        was |= si[I_PREV_SEL, m] == lid
+    return p + h * abs(p) + h_abs if was else p
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -17,7 +17,7 @@ import numpy as np
 
 from .frustum import CameraFrames
 from .priority import berka_eccentricity
-from .scene import DIRECTIONAL
+from .scene import DIRECTIONAL, LightStore
 from .select import F_NEW_W, I_NEW_ROW
 
 MIN_TIER, MAX_TIER = 256, 4096
@@ -51,7 +51,7 @@ def _importance(rows, position, radius, intensity, prio, cams, c1):
     return imp, s_max
 
 
-def rank_shadow_lights(lights: object, frames: CameraFrames, candidate: np.ndarray,
+def rank_shadow_lights(lights: LightStore, frames: CameraFrames, candidate: np.ndarray,
                        prev_ids: np.ndarray, prev_tiers: np.ndarray, budget: int, h: float,
                        h_abs: float, c1: float) -> tuple[np.ndarray, np.ndarray]:
     """(rows of the shadow lights in rank order, their tiers) for the candidate rows.
