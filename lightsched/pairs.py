@@ -55,7 +55,7 @@ from .select import (
     hysteresis_key,
     topk_insert,
 )
-from .shadows import pick_slot_shadows
+from .shadows import caster_bits, pick_slot_shadows
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -93,16 +93,19 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _centre_cells(lo, hi, visible, g_f, dims):
+def _centre_cells(lo, hi, chosen, region, g_f, dims):
     """Per object: its centre's cell, ncell for an object with a half-extent over one cell
     edge (it goes past the last cell, to the big objects every light tests directly), or
-    -1 if invisible."""
+    -1 if not chosen or its box misses the region box [6] (lo, hi)."""
     n = lo.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     cell_edge = 1.0 / g_f[3]
     key = np.empty(n, np.int64)
     for o in nb.prange(n):
-        if not visible[o]:
+        out = not chosen[o]
+        for a in range(3):
+            out |= hi[o, a] < region[a] or lo[o, a] > region[3 + a]
+        if out:
             key[o] = -1
             continue
         big = False
@@ -163,14 +166,19 @@ def light_order(hot, rows, g_f, dims):
     return out
 
 
+EVERYWHERE = np.array([-np.inf, -np.inf, -np.inf, np.inf, np.inf, np.inf])
+
+
 def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.ndarray,
-                  dims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  dims: np.ndarray, region: np.ndarray = EVERYWHERE
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
     in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N]
     (-1 if invisible), cell_start int64[ncell+2]): the objects centred in cell c are
     positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run; the
-    objects larger than a cell come last, from cell_start[ncell] to V."""
-    key = _centre_cells(lo, hi, visible, g_f, dims)
+    objects larger than a cell come last, from cell_start[ncell] to V. The caster grid
+    passes another selection than ``visible`` and a region its objects must meet."""
+    key = _centre_cells(lo, hi, visible, region, g_f, dims)
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
@@ -239,6 +247,34 @@ def _slab_d2(p, cell, origin, h, dim, ext_a):
     hi = np.inf if cell == dim - 1 else origin + (cell + 1) * h + eps + ext_a
     d = max(lo - p, 0.0, p - hi)
     return d * d
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _reach2(hot, j):
+    """Squared radius of light j's sphere widened by a relative 1e-9 (and 1e-15 of its
+    coordinates), so the cell walk's rounding never drops an object the exact test keeps."""
+    r = hot[j, 3]
+    big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
+    return big_r * big_r
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _column_run(hot, j, c, x, y, dxx, rr, grid):
+    """Positions [v0, v1) of the objects centred in the column (x, y) of light j's cell
+    range c that its widened sphere (squared radius rr; dxx its x slab distance) can reach:
+    the cube is cut to the sphere column by column, empty when the sphere misses the
+    column's slab, else trimmed to its chord along z."""
+    g_f, dims, cell_start, ext, _ = grid
+    dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
+    if dd > rr:
+        return 0, 0
+    zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
+    z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
+    z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
+    if z1 < z0:
+        return 0, 0
+    base = (x * dims[1] + y) * dims[2]
+    return cell_start[base + z0], cell_start[base + z1 + 1]
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -355,29 +391,16 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     p2 = hot[j, 2]
     rr_exact = r * r
     c = _light_cells(hot, j, g_f, dims, ext)
-    # Cut the cube to the sphere column by column: a column whose slab the (widened)
-    # sphere misses is skipped, and a run is trimmed to the sphere's chord.
-    big_r = r + r * 1e-9 + (abs(hot[j, 0]) + abs(hot[j, 1]) + abs(hot[j, 2])) * 1e-15
-    rr = big_r * big_r
+    rr = _reach2(hot, j)
     for x in range(c[0], c[3] + 1):
         dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
         if dxx > rr:
             continue
         for y in range(c[1], c[4] + 1):
-            dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
-            if dd > rr:
-                continue
-            zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
-            z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
-            z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
-            if z1 < z0:
-                continue
-            base = (x * dims[1] + y) * dims[2]
             # The objects centred in a column of cells are one run of positions. The range
             # test (exact, DESIGN's d2 <= r*r) compacts the survivors without branching (a
             # test that fails at random would mispredict); the rest runs on survivors only.
-            v0 = cell_start[base + z0]
-            v1 = cell_start[base + z1 + 1]
+            v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
             if v1 - v0 > keep.shape[0]:
                 keep = np.empty(2 * (v1 - v0), np.int32)
             m = 0
@@ -392,6 +415,64 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
                         n, model, w_obj, w_int)
     count[t] = n - offsets[t]
     return keep
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
+    """Appends (object row, caster mask) of grid position v for shadowed light row j at n
+    when it is a caster: casts_shadows, mask, d2 <= r*r, then shadows.caster_bits.
+    Returns the new n."""
+    box, box_rows, lo, hi = recs
+    o = box_rows[v]
+    if not casts[o] or np.int64(box[v, 6]) & np.int64(hot[j, 4]) == 0:
+        return n
+    r = hot[j, 3]
+    if not box_d2(box, v, hot[j, 0], hot[j, 1], hot[j, 2]) <= r * r:
+        return n
+    bits = caster_bits(hot, lf, j, typ, vols, t, lo, hi, v)
+    if bits != 0:
+        out_rows[n] = o
+        out_mask[n] = bits
+        n += 1
+    return n
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def grid_casters(lights, rows, grid, recs, casts, vols, offsets, out):
+    """Casters (DESIGN "Casters") of the shadowed point and spot lights ``rows`` (parallel)
+    among the objects of a grid built like the light pass's (visible_order /
+    visible_objects): each light walks the same column runs as ``light_pass`` and keeps
+    the objects that pass ``_caster``. vols = culling volumes indexed like rows; recs =
+    (records [V, 8], object row per position); out = (object rows, caster masks), light t
+    writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
+    a light's rows come in grid order."""
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    box, box_rows = recs
+    walk = (box, box_rows, box[:, 0:3], box[:, 3:6])
+    # Unpacked here: arrays taken out of a tuple inside the parallel loop were written to
+    # copies (numba 0.68 parfors), and the stores were lost.
+    out_rows, out_mask = out
+    count = np.zeros(rows.shape[0], np.int64)
+    for t in nb.prange(rows.shape[0]):
+        j = rows[t]
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        n = offsets[t]
+        c = _light_cells(hot, j, g_f, dims, ext)
+        rr = _reach2(hot, j)
+        for x in range(c[0], c[3] + 1):
+            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+            if dxx > rr:
+                continue
+            for y in range(c[1], c[4] + 1):
+                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
+                for v in range(v0, v1):
+                    n = _caster(hot, lf, j, typ, t, walk, casts, vols, v, out_rows, out_mask, n)
+        for b in range(big_pos.shape[0]):
+            n = _caster(hot, lf, j, typ, t, walk, casts, vols, big_pos[b], out_rows, out_mask,
+                        n)
+        count[t] = n - offsets[t]
+    return count
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")

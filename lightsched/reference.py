@@ -10,10 +10,19 @@ Decisions taken where DESIGN is silent (the fast path makes the same ones):
 
 - ``visible_lights`` lists every visible light (directional always), whatever the masks and
   the unshadowed rule.
-- Shadowed lights, tiers and ``slot_shadow`` follow DESIGN; casters are not built yet
-  (empty). Directional candidates rank among themselves by i + p_user, raised by the same
-  hysteresis as the others when shadowed last frame. 2^ceil(log2 s) is evaluated exactly
-  (math.frexp). ``cascade_splits`` is computed.
+- Shadowed lights, tiers and ``slot_shadow`` follow DESIGN. Directional candidates rank
+  among themselves by i + p_user, raised by the same hysteresis as the others when
+  shadowed last frame. 2^ceil(log2 s) is evaluated exactly (math.frexp). ``cascade_splits`` is computed.
+- Casters (DESIGN "Casters"): a frustum's corners are numbered z*4 + x*2 + y (z 0 near, 1
+  far; x 0 left, 1 right; y 0 bottom, 1 top), computed as p + z f + (+-z t_x) r + (+-z t_y) u
+  left to right, and its centroid is their mean. A hull edge plane through light position
+  p has normal (c0 - p) x (c1 - p) and point p; a sweep edge plane has normal (c1 - c0) x v
+  and point c0 (c0 the lower-numbered corner); either is flipped when the centroid is on
+  its negative side. Normals are not normalised: the AABB test only needs their sign.
+  A cube-face pyramid's planes are evaluated at the box corner farthest along each
+  normal, x' = corner - p per axis. A point light's listed objects are those with some face
+  bit set; a slice whose far depth is below its near depth (shadow_distance < near) is
+  tested as written.
 - Directional lights are ranked by P = i + p_user whatever the masks; with
   ``directional_in_slots`` they compete for slots instead (masks apply).
 - Hysteresis looks at last frame's selected set, including selected lights that waited
@@ -160,7 +169,7 @@ class _Light:
 
 
 class _Object:
-    __slots__ = ("row", "id", "lo", "hi", "mask", "centre", "R", "e2")
+    __slots__ = ("row", "id", "lo", "hi", "mask", "centre", "R", "e2", "casts")
 
 
 def _read_lights(store: Any) -> list[_Light]:
@@ -192,6 +201,7 @@ def _read_objects(store: Any) -> list[_Object]:
         lo = ob.lo = _vec(store.bounds_min[row])
         hi = ob.hi = _vec(store.bounds_max[row])
         ob.mask = int(store.mask[row])
+        ob.casts = bool(store.casts_shadows[row])
         ob.centre = ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2)
         ex, ey, ez = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
         ob.e2 = ex * ex + ey * ey + ez * ez
@@ -320,6 +330,142 @@ def pow2_ceil(x: float) -> float:
 def _by_priority(items: dict[int, float]) -> list[int]:
     """Light ids by value descending, ties to the lower id."""
     return sorted(items, key=lambda lid: (-items[lid], lid))
+
+
+# --------------------------------------------------------------------------- casters
+
+Plane = tuple[Vec, Vec]  # (normal, point); signed distance n . (x - point)
+
+# Frustum faces: 0 near, 1 far, 2 left, 3 right, 4 bottom, 5 top. A corner z*4 + x*2 + y
+# lies on near (z 0) or far (z 1), left (x 0) or right (x 1), bottom (y 0) or top (y 1).
+_FACE_CORNERS = [[c for c in range(8) if test(c)] for test in (
+    lambda c: c >> 2 == 0, lambda c: c >> 2 == 1, lambda c: (c >> 1) & 1 == 0,
+    lambda c: (c >> 1) & 1 == 1, lambda c: c & 1 == 0, lambda c: c & 1 == 1)]
+
+
+def _edges() -> list[tuple[int, int, int, int]]:
+    """(face a, face b, corner c0 < c1) for the 12 edges: two faces that share two corners."""
+    out = []
+    for a in range(6):
+        for b in range(a + 1, 6):
+            common = sorted(set(_FACE_CORNERS[a]) & set(_FACE_CORNERS[b]))
+            if len(common) == 2:
+                out.append((a, b, common[0], common[1]))
+    return out
+
+
+EDGES = _edges()
+
+
+def frustum_corners(cam: CameraFrame, z_near: float, z_far: float) -> list[Vec]:
+    """The 8 corners p + z f +- z t_x r +- z t_y u at depths z_near and z_far."""
+    p, f, r, u = cam.position, cam.f, cam.r, cam.u
+    out = []
+    for z in (z_near, z_far):
+        for sx in (-z * cam.t_x, z * cam.t_x):
+            for sy in (-z * cam.t_y, z * cam.t_y):
+                out.append(tuple(p[i] + z * f[i] + sx * r[i] + sy * u[i] for i in range(3)))
+    return out
+
+
+def _mean(points: list[Vec]) -> Vec:
+    return tuple(sum(q[i] for q in points) / len(points) for i in range(3))
+
+
+def _sub(a: Vec, b: Vec) -> Vec:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _oriented(n: Vec, point: Vec, inside: Vec) -> Plane:
+    """The plane (n, point) flipped if need be so that ``inside`` is not on its negative side."""
+    if _dot(n, _sub(inside, point)) < 0:
+        n = (-n[0], -n[1], -n[2])
+    return n, point
+
+
+def hull_planes(cam: CameraFrame, p: Vec) -> list[Plane]:
+    """Convex hull of point p and the camera frustum F (point/spot culling volume): F's
+    planes with p at signed distance >= 0, plus the plane through p and every edge of F
+    whose two faces see p on opposite sides."""
+    corners = frustum_corners(cam, cam.near, cam.far)
+    centroid = _mean(corners)
+    side = [signed_distance(n, q, p) >= 0 for n, q in cam.planes]
+    planes = [pl for pl, keep in zip(cam.planes, side, strict=True) if keep]
+    for a, b, c0, c1 in EDGES:
+        if side[a] != side[b]:
+            n = _cross(_sub(corners[c0], p), _sub(corners[c1], p))
+            planes.append(_oriented(n, p, centroid))
+    return planes
+
+
+def sweep_planes(cam: CameraFrame, z_near: float, z_far: float, v: Vec) -> list[Plane]:
+    """The slice [z_near, z_far] of the camera frustum swept along v (towards a directional
+    light): the slice's planes with n . v >= 0, plus for every edge between a kept and a
+    dropped face the plane containing that edge and v."""
+    p, f = cam.position, cam.f
+    corners = frustum_corners(cam, z_near, z_far)
+    centroid = _mean(corners)
+    slice_planes = [(f, tuple(p[i] + z_near * f[i] for i in range(3))),
+                    ((-f[0], -f[1], -f[2]), tuple(p[i] + z_far * f[i] for i in range(3)))]
+    slice_planes += cam.planes[2:]
+    keep = [_dot(n, v) >= 0 for n, _ in slice_planes]
+    planes = [pl for pl, k in zip(slice_planes, keep, strict=True) if k]
+    for a, b, c0, c1 in EDGES:
+        if keep[a] != keep[b]:
+            n = _cross(_sub(corners[c1], corners[c0]), v)
+            planes.append(_oriented(n, corners[c0], centroid))
+    return planes
+
+
+def cube_face_bits(p: Vec, r: float, lo: Vec, hi: Vec) -> int:
+    """Bit f for each cube face pyramid (+x, -x, +y, -y, +z, -z) the box is in: for +x,
+    x' >= 0, x' -+ y' >= 0, x' -+ z' >= 0, r - x' >= 0 with x' = x - p, each at the box
+    corner farthest along the plane's normal."""
+    bits = 0
+    for a in range(3):
+        for sign in (1, -1):
+            lo_a, hi_a = lo[a] - p[a], hi[a] - p[a]
+            top = hi_a if sign > 0 else -lo_a      # the largest sign * x' over the box
+            bottom = lo_a if sign > 0 else -hi_a   # the smallest
+            ok = top >= 0 and r - bottom >= 0
+            for b in range(3):
+                if b != a:
+                    ok = ok and top - (lo[b] - p[b]) >= 0 and top + (hi[b] - p[b]) >= 0
+            if ok:
+                bits |= 1 << (2 * a + (sign < 0))
+    return bits
+
+
+def caster_mask(lt: _Light, ob: _Object, volumes: list[list[Plane]]) -> int:
+    """caster_masks entry of object ``ob`` for shadowed light ``lt`` (0: not a caster).
+    ``volumes`` are the light's culling volumes: one hull per camera (point/spot) or one
+    sweep per camera and cascade, bit camera*C + cascade (directional)."""
+    if not (ob.casts and lt.mask & ob.mask):
+        return 0
+    if lt.type == DIRECTIONAL:
+        bits = 0
+        for bit, planes in enumerate(volumes):
+            if aabb_in_planes(planes, ob.lo, ob.hi):
+                bits |= 1 << bit
+        return bits
+    if affects_geometry(lt, ob) is None:
+        return 0
+    if not any(aabb_in_planes(planes, ob.lo, ob.hi) for planes in volumes):
+        return 0
+    return 1 if lt.type == SPOT else cube_face_bits(lt.position, lt.radius, ob.lo, ob.hi)
+
+
+def culling_volumes(lt: _Light, cams: list[CameraFrame], cfg: Config) -> list[list[Plane]]:
+    if lt.type != DIRECTIONAL:
+        return [hull_planes(cam, lt.position) for cam in cams]
+    v = (-lt.direction[0], -lt.direction[1], -lt.direction[2])
+    volumes = []
+    for cam in cams:
+        z = cascade_splits(cam, cfg)
+        for c in range(cfg.cascades):
+            a = cam.near if c == 0 else z[c] - cfg.cascade_overlap * (z[c] - z[c - 1])
+            volumes.append(sweep_planes(cam, a, z[c + 1], v))
+    return volumes
 
 
 # --------------------------------------------------------------------------- scheduler
@@ -515,7 +661,20 @@ class Scheduler(SceneAPI):
         frame.directional_lights = np.array(directional_ids, dtype=np.int32)
         frame.shadow_lights = np.array(shadow_ids, dtype=np.int32)
         frame.shadow_tier = np.array(tiers, dtype=np.uint16)
-        frame.caster_offsets = np.zeros(len(shadow_ids) + 1, np.int64)
+        by_id = {lt.id: lt for lt in lights}
+        offsets, ids, masks = [0], [], []
+        for lid in shadow_ids:
+            lt = by_id[lid]
+            volumes = culling_volumes(lt, cams, cfg)
+            for ob in sorted(objects, key=lambda o: o.id):
+                bits = caster_mask(lt, ob, volumes)
+                if bits:
+                    ids.append(ob.id)
+                    masks.append(bits)
+            offsets.append(len(ids))
+        frame.caster_offsets = np.array(offsets, np.int64)
+        frame.caster_ids = np.array(ids, np.int32)
+        frame.caster_masks = np.array(masks, np.uint32)
         frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
                                         dtype=np.int32)
         frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],

@@ -24,6 +24,7 @@ from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visib
 from .pairs import (
     GROUP_PARTS,
     RUN_SPLIT,
+    grid_casters,
     grid_shape,
     group_pairs,
     light_bounds,
@@ -35,7 +36,7 @@ from .pairs import (
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, Camera, Config, SceneAPI
-from .shadows import rank_shadow_lights
+from .shadows import culling_volumes, rank_shadow_lights, sweep_casters
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -167,6 +168,9 @@ class Scheduler(SceneAPI):
         dir_p = lights.intensity[dir_rows] + lights.priority[dir_rows]
         directional = lights.id[dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]]
         t = _lap(seconds, "shadows", t)
+        casters, plan["casters"] = self._casters(frames, splits, shadow_rows, (hot, lf), grid,
+                                                 vis, vis_o)
+        t = _lap(seconds, "casters", t)
         n, n_pairs = len(objs), int(count.sum())
         lists = (self._scratch("start", n + 1, np.int64)[:n + 1],
                  self._scratch("obj_pairs", 2 * n_pairs, np.float64)[:2 * n_pairs]
@@ -205,7 +209,7 @@ class Scheduler(SceneAPI):
             fade_state=out[4], directional_lights=directional.astype(np.int32),
             visible_lights=lights.id[vis_l], cascade_splits=splits, slot_shadow=out[7],
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
-            caster_offsets=np.zeros(shadow_rows.size + 1, np.int64))
+            caster_offsets=casters[0], caster_ids=casters[1], caster_masks=casters[2])
         freeze(frame)
         self._shadow_prev = (lights.id[shadow_rows], shadow_tier.astype(np.int64))
         plan["visibility"] = f"frustum planes, {len(cameras)} camera(s)"
@@ -214,7 +218,7 @@ class Scheduler(SceneAPI):
             plan["priority"] += "; precision 'fast' not built yet, ran exact"
         plan["fade"] = "fused with selection in the object pass"
         plan["shadows"] = (f"{shadow_rows.size} of {int(candidate.sum())} candidates shadowed "
-                           "(ranking, tiers, slot_shadow); caster lists not built yet"
+                           "(ranking, tiers, slot_shadow)"
                            if candidate.any() else "skipped: no visible shadowed light "
                            "affects a visible object")
         t = _lap(seconds, "output", t)
@@ -235,6 +239,86 @@ class Scheduler(SceneAPI):
             "seconds": seconds,
         }
         return frame
+
+
+    def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
+                 lights_packed: tuple[np.ndarray, np.ndarray], grid: tuple, vis: tuple,
+                 vis_o: np.ndarray) -> tuple[tuple[np.ndarray, ...], str]:
+        """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, and
+        the plan: directional lights scan every object against their cascade sweeps; point
+        and spot lights walk the light pass's grid of visible objects, then a grid of the
+        same kind over the invisible casting objects that meet their spheres' bounding box
+        (objects need not be visible to cast)."""
+        lights, objs = self.lights, self.objects
+        n_s = shadow_rows.size
+        if n_s == 0:
+            empty = (np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.uint32))
+            return empty, "skipped: no shadow lights"
+        vn, vq, vm, shared = culling_volumes(lights, shadow_rows, frames, splits,
+                                     self.config.cascade_overlap)
+        lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
+        found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
+        is_dir = lights.type[shadow_rows] == DIRECTIONAL
+        plan = []
+        sun = np.flatnonzero(is_dir)
+        if sun.size:
+            bits = sweep_casters(lo, hi, casts, objs.mask,
+                                 lights.mask[shadow_rows[sun]].astype(np.int64),
+                                 (vn[sun], vq[sun], vm[sun], shared[sun]))
+            for i, t in enumerate(sun):
+                rows = np.flatnonzero(bits[i])
+                found[t] = (rows, bits[i][rows])
+            plan.append(f"{sun.size} directional: every object against "
+                        f"{vm.shape[1]} cascade sweeps")
+        local = np.flatnonzero(~is_dir)
+        if local.size:
+            rows_l = shadow_rows[local].astype(np.int64)
+            vols = (vn[local], vq[local], vm[local], shared[local])
+            parts = [self._grid_casters(lights_packed, rows_l, grid, vis, vols)]
+            # The invisible casting objects, as a subset with its own grid over the box of
+            # the lights' spheres; a grid position maps back to its row through ``hidden``.
+            hidden = np.flatnonzero(casts & ~vis_o)
+            radius = lights.radius[rows_l]
+            reach = lights.position[rows_l]
+            region = np.concatenate([(reach - radius[:, None]).min(0),
+                                     (reach + radius[:, None]).max(0)])
+            g_f, dims = grid_shape(region[:3], region[3:],
+                                   CELL_PER_RADIUS * float(np.median(radius)))
+            h_lo, h_hi = lo[hidden], hi[hidden]
+            h_pos_rows, h_pos, h_start = visible_order(h_lo, h_hi, np.ones(hidden.size, bool),
+                                                       g_f, dims, region)
+            nh = h_pos_rows.size
+            if nh:
+                n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
+                h_box = np.empty((nh, 8))
+                ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_pos, n_small, h_box)
+                h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
+                parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
+                                                (h_box, hidden[h_pos_rows]), vols))
+            for i, t in enumerate(local):
+                rows = np.concatenate([p[0][i] for p in parts])
+                masks = np.concatenate([p[1][i] for p in parts])
+                order = np.argsort(rows, kind="stable")
+                found[t] = (rows[order], masks[order])
+            plan.append(f"{local.size} point/spot: the grid of visible objects, then a grid of "
+                        f"{nh} invisible casting objects near them")
+        counts = np.array([f[0].size for f in found], np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32)
+        masks = np.concatenate([f[1] for f in found]).astype(np.uint32)
+        return (offsets, ids, masks), "; ".join(plan)
+
+    def _grid_casters(self, lights_packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
+                      grid: tuple, recs: tuple, vols: tuple
+                      ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Per light of ``rows``, (object rows, masks) of its casters in one grid."""
+        offsets = light_bounds(lights_packed[0], rows, grid, recs[0].shape[0])
+        out = (np.empty(int(offsets[-1]), np.int64), np.empty(int(offsets[-1]), np.uint32))
+        count = grid_casters(lights_packed, rows, grid, recs, self.objects.casts_shadows, vols,
+                             offsets, out)
+        ends = offsets[:-1] + count
+        return ([out[0][a:b] for a, b in zip(offsets[:-1], ends, strict=True)],
+                [out[1][a:b] for a, b in zip(offsets[:-1], ends, strict=True)])
 
 
 def _rate(dt: float, fade_time: float) -> float:

@@ -1,11 +1,22 @@
-"""Shadowed lights: ranking, resolution tiers and slot_shadow (DESIGN section 2, "Shadowed
-lights" and "slot_shadow"). Caster lists are not built yet (issue 3).
-slot_shadow's rule (pick_slot_shadows) is inlined into pairs.object_pass.
+"""Shadowed lights: ranking, resolution tiers, culling volumes, casters and slot_shadow
+(DESIGN section 2, "Shadowed lights", "Casters" and "slot_shadow").
 
 Takes the packed lights and cameras, which lights are candidates (visible, shadows = true,
 affecting a visible object: pairs.py counts that) and last frame's shadowed lights with
-their tiers; returns this frame's shadow lights in rank order with their tiers, and per
-object slot which shadow map it samples.
+their tiers; returns this frame's shadow lights in rank order with their tiers, their
+culling volumes (``culling_volumes``), per shadowed light its casters as (object rows
+ascending, caster_masks), and per object slot which shadow map it samples.
+
+Where the fused copies live: slot_shadow's rule (``pick_slot_shadows``) is inlined into
+pairs.object_pass; the caster test of a point or spot light (``caster_bits``) runs inside
+pairs.grid_casters, which walks the same object grids as the light pass; directional
+casters are a parallel scan over every object (``sweep_casters``), since their influence
+volume is everything.
+
+Volumes are convex plane sets (normal, point) [.., MAX_PLANES, 3] with a plane count; the
+normals of the added edge planes are not normalised (the AABB test needs only the sign).
+The corner numbering, edge-plane construction and evaluation order are those written in
+reference.py's docstring, so both agree bit for bit.
 """
 
 from __future__ import annotations
@@ -16,11 +27,19 @@ import numba as nb
 import numpy as np
 
 from .frustum import CameraFrames
-from .priority import berka_eccentricity
-from .scene import DIRECTIONAL, LightStore
+from .priority import berka_eccentricity, spot_cone
+from .scene import DIRECTIONAL, SPOT, LightStore
 from .select import F_NEW_W, I_NEW_ROW
 
 MIN_TIER, MAX_TIER = 256, 4096
+MAX_PLANES = 18  # a convex volume here has at most 6 faces plus 12 edge planes
+
+# The 12 edges of a frustum: (face a, face b, corner c0, corner c1), faces 0 near, 1 far,
+# 2 left, 3 right, 4 bottom, 5 top; corner z*4 + x*2 + y (z 0 near / 1 far, x 0 left /
+# 1 right, y 0 bottom / 1 top); c0 < c1 are the two corners the faces share.
+EDGES = np.array([[0, 2, 0, 1], [0, 3, 2, 3], [0, 4, 0, 2], [0, 5, 1, 3],
+                  [1, 2, 4, 5], [1, 3, 6, 7], [1, 4, 4, 6], [1, 5, 5, 7],
+                  [2, 4, 0, 4], [2, 5, 1, 5], [3, 4, 2, 6], [3, 5, 3, 7]], np.int64)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -115,3 +134,278 @@ def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
         if best < 0:
             break
         out[o, best] = shadow_of_row[si[I_NEW_ROW, best]]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _corners(cam_p, basis, tan_xy, z_near, z_far, out):
+    """out[8, 3] = p + z f + (+-z t_x) r + (+-z t_y) u, corner z*4 + x*2 + y; returns the
+    centroid (their mean)."""
+    cen = np.zeros(3)
+    for zi in range(2):
+        z = z_near if zi == 0 else z_far
+        for xi in range(2):
+            sx = z * tan_xy[0] if xi else -z * tan_xy[0]
+            for yi in range(2):
+                sy = z * tan_xy[1] if yi else -z * tan_xy[1]
+                c = zi * 4 + xi * 2 + yi
+                for i in range(3):
+                    out[c, i] = cam_p[i] + z * basis[0, i] + sx * basis[1, i] + sy * basis[2, i]
+    for i in range(3):
+        acc = 0.0
+        for c in range(8):
+            acc += out[c, i]
+        cen[i] = acc / 8
+    return cen
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _edge_plane(a, b, anchor, cen, vn, vq, m):
+    """Appends plane m: normal a x b, point ``anchor``, flipped when the centroid is on its
+    negative side."""
+    n0 = a[1] * b[2] - a[2] * b[1]
+    n1 = a[2] * b[0] - a[0] * b[2]
+    n2 = a[0] * b[1] - a[1] * b[0]
+    if n0 * (cen[0] - anchor[0]) + n1 * (cen[1] - anchor[1]) + n2 * (cen[2] - anchor[2]) < 0:
+        n0, n1, n2 = -n0, -n1, -n2
+    vn[m, 0], vn[m, 1], vn[m, 2] = n0, n1, n2
+    for i in range(3):
+        vq[m, i] = anchor[i]
+    return m + 1
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _hull(p, corners, cen, face_n, face_q, vn, vq):
+    """Convex hull of point p and a frustum (faces face_n/face_q [6, 3]): the faces with p at
+    signed distance >= 0, then for every edge whose faces see p on opposite sides the plane
+    through p and that edge (normal (c0 - p) x (c1 - p)). Returns the plane count."""
+    side = np.empty(6, np.bool_)
+    m = 0
+    for f in range(6):
+        d = (face_n[f, 0] * (p[0] - face_q[f, 0]) + face_n[f, 1] * (p[1] - face_q[f, 1])
+             + face_n[f, 2] * (p[2] - face_q[f, 2]))
+        side[f] = d >= 0
+        if side[f]:
+            vn[m] = face_n[f]
+            vq[m] = face_q[f]
+            m += 1
+    a = np.empty(3)
+    b = np.empty(3)
+    for e in range(12):
+        if side[EDGES[e, 0]] != side[EDGES[e, 1]]:
+            for i in range(3):
+                a[i] = corners[EDGES[e, 2], i] - p[i]
+                b[i] = corners[EDGES[e, 3], i] - p[i]
+            m = _edge_plane(a, b, p, cen, vn, vq, m)
+    return m
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _sweep(v, corners, cen, face_n, face_q, vn, vq):
+    """A frustum slice (faces face_n/face_q [6, 3]) swept along v: the faces with n . v >= 0,
+    plus for every edge between a kept and a dropped face the plane containing the edge
+    and v (normal (c1 - c0) x v, point c0). Returns (plane count, shared): the kept side
+    faces come first, ``shared`` of them; they are the camera's own planes, bit for bit
+    the same in every cascade, so a caster scan tests them once per camera. Then the edge
+    planes, then the kept near/far face (the order of an AND does not change it; this one
+    rejects early)."""
+    keep = np.empty(6, np.bool_)
+    for f in range(6):
+        keep[f] = face_n[f, 0] * v[0] + face_n[f, 1] * v[1] + face_n[f, 2] * v[2] >= 0
+    m = 0
+    for f in range(2, 6):
+        if keep[f]:
+            vn[m] = face_n[f]
+            vq[m] = face_q[f]
+            m += 1
+    shared = m
+    a = np.empty(3)
+    for e in range(12):
+        if keep[EDGES[e, 0]] != keep[EDGES[e, 1]]:
+            for i in range(3):
+                a[i] = corners[EDGES[e, 3], i] - corners[EDGES[e, 2], i]
+            m = _edge_plane(a, v, corners[EDGES[e, 2]], cen, vn, vq, m)
+    for f in range(2):
+        if keep[f]:
+            vn[m] = face_n[f]
+            vq[m] = face_q[f]
+            m += 1
+    return m, shared
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _volumes(typ, position, direction, cams, splits, overlap):
+    """Kernel of ``culling_volumes``: per light (row of typ/position/direction) its volumes
+    [L, n_vol, MAX_PLANES, 3] (normals, points), plane counts [L, n_vol] (-1 for the
+    volumes a point or spot light does not have: it has one per camera) and, for a
+    directional light, the number of leading planes its cascades of camera k share
+    [L, n_cam]."""
+    cam_p, basis, tan_xy, plane_n, plane_p, near_far = cams
+    n_cam = cam_p.shape[0]
+    n_casc = splits.shape[1] - 1
+    n_l = typ.shape[0]
+    vn = np.zeros((n_l, n_cam * n_casc, MAX_PLANES, 3))
+    vq = np.zeros((n_l, n_cam * n_casc, MAX_PLANES, 3))
+    vm = np.full((n_l, n_cam * n_casc), -1, np.int64)
+    shared = np.zeros((n_l, n_cam), np.int64)
+    corners = np.empty((8, 3))
+    face_n = np.empty((6, 3))
+    face_q = np.empty((6, 3))
+    v = np.empty(3)
+    for t in range(n_l):
+        if typ[t] != DIRECTIONAL:
+            for k in range(n_cam):
+                cen = _corners(cam_p[k], basis[k], tan_xy[k], near_far[k, 0], near_far[k, 1],
+                               corners)
+                vm[t, k] = _hull(position[t], corners, cen, plane_n[k], plane_p[k], vn[t, k],
+                                 vq[t, k])
+            continue
+        for i in range(3):
+            v[i] = -direction[t, i]
+        for k in range(n_cam):
+            z = splits[k]
+            for c in range(n_casc):
+                z_near = near_far[k, 0] if c == 0 else z[c] - overlap * (z[c] - z[c - 1])
+                z_far = z[c + 1]
+                cen = _corners(cam_p[k], basis[k], tan_xy[k], z_near, z_far, corners)
+                face_n[:] = plane_n[k]
+                face_q[:] = plane_p[k]
+                for i in range(3):
+                    face_q[0, i] = cam_p[k, i] + z_near * basis[k, 0, i]
+                    face_q[1, i] = cam_p[k, i] + z_far * basis[k, 0, i]
+                b = k * n_casc + c
+                vm[t, b], shared[t, k] = _sweep(v, corners, cen, face_n, face_q, vn[t, b],
+                                                vq[t, b])
+    return vn, vq, vm, shared
+
+
+def culling_volumes(lights: LightStore, rows: np.ndarray, frames: CameraFrames,
+                    splits: np.ndarray, overlap: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The culling volumes of the shadowed lights ``rows`` (DESIGN "Casters"): for a point or
+    spot light one hull of its position and each camera's frustum (volume k = camera k);
+    for a directional light each camera's cascade slices [a_c, z_c+1] swept towards the
+    light (volume k*C + c, its caster_masks bit). Returns (normals, points, counts, shared
+    leading planes per camera; see ``_volumes``)."""
+    cams = (frames.position, frames.basis, frames.tan_xy, frames.plane_n, frames.plane_p,
+            frames.near_far)
+    return _volumes(lights.type[rows], lights.position[rows], lights.direction[rows], cams,
+                    splits, overlap)
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _plane_ok(vn, vq, t, b, i, lo, hi, v):
+    """The corner of box v ([lo, hi] rows of [n, 3] arrays) farthest along the normal of
+    plane i of volume b of light t has signed distance >= 0."""
+    n0 = vn[t, b, i, 0]
+    n1 = vn[t, b, i, 1]
+    n2 = vn[t, b, i, 2]
+    c0 = hi[v, 0] if n0 >= 0.0 else lo[v, 0]
+    c1 = hi[v, 1] if n1 >= 0.0 else lo[v, 1]
+    c2 = hi[v, 2] if n2 >= 0.0 else lo[v, 2]
+    return n0 * (c0 - vq[t, b, i, 0]) + n1 * (c1 - vq[t, b, i, 1]) + n2 * (c2 - vq[t, b, i, 2]) >= 0.0
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _in_planes(vn, vq, t, b, first, end, lead, lo, hi, v):
+    """The conservative AABB test of box v against planes first..end-1 of volume b of light
+    t (DESIGN "Tests"),
+    trying plane ``lead`` first. Returns (inside, the plane that failed or lead): a caller
+    scanning many boxes passes that plane back as ``lead``, so the plane that rejects most
+    boxes is soon tried first. The AND of the planes does not depend on their order."""
+    if lead >= first and lead < end and not _plane_ok(vn, vq, t, b, lead, lo, hi, v):
+        return False, lead
+    for i in range(first, end):
+        if i != lead and not _plane_ok(vn, vq, t, b, i, lo, hi, v):
+            return False, i
+    return True, lead
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def box_in_volume(vols, t, b, lo, hi, v):
+    """The conservative AABB test of box v against volume b of light t (DESIGN "Tests")."""
+    return _in_planes(vols[0], vols[1], t, b, 0, vols[2][t, b], -1, lo, hi, v)[0]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def cube_faces(p0, p1, p2, r, lo_v, hi_v, v):
+    """Bit f for every cube-face pyramid (+x, -x, +y, -y, +z, -z) box v is in: for +x with
+    x' = x - p: x' >= 0, x' -+ y' >= 0, x' -+ z' >= 0, r - x' >= 0, each at the box corner
+    farthest along the plane's normal."""
+    lo = (lo_v[v, 0] - p0, lo_v[v, 1] - p1, lo_v[v, 2] - p2)
+    hi = (hi_v[v, 0] - p0, hi_v[v, 1] - p1, hi_v[v, 2] - p2)
+    bits = 0
+    for a in range(3):
+        for neg in range(2):
+            top = -lo[a] if neg else hi[a]
+            bottom = -hi[a] if neg else lo[a]
+            ok = top >= 0 and r - bottom >= 0
+            for b in range(3):
+                if b != a:
+                    ok = ok and top - lo[b] >= 0 and top + hi[b] >= 0
+            if ok:
+                bits |= 1 << (2 * a + neg)
+    return bits
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def caster_bits(hot, lf, j, typ, vols, t, lo, hi, v):
+    """caster_masks entry of box v ([lo, hi] rows) for point or spot light row j, whose
+    culling volumes are vols[.][t] (one per camera), once the caller has checked
+    casts_shadows, the mask and d2 <= r*r: the spot cone, then some camera's hull, then the
+    cube faces (point) or bit 0 (spot). 0: not a caster."""
+    vn, vq, vm, _ = vols
+    if typ == SPOT:
+        ex = hi[v, 0] - lo[v, 0]
+        ey = hi[v, 1] - lo[v, 1]
+        ez = hi[v, 2] - lo[v, 2]
+        e2 = ex * ex + ey * ey + ez * ez
+        geo = ((lo[v, 0] + hi[v, 0]) / 2, (lo[v, 1] + hi[v, 1]) / 2,
+               (lo[v, 2] + hi[v, 2]) / 2, math.sqrt(e2) / 2, e2)
+        meets, _ = spot_cone(hot, lf, j, geo, False)
+        if not meets:
+            return 0
+    for k in range(vm.shape[1]):
+        if vm[t, k] >= 0 and box_in_volume(vols, t, k, lo, hi, v):
+            if typ == SPOT:
+                return 1
+            return cube_faces(hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], lo, hi, v)
+    return 0
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def sweep_casters(lo, hi, casts, omask, lmask, vols):
+    """caster_masks of every object for each directional light t (parallel over objects):
+    bit b set iff the object casts, its mask matches lmask[t] and its box [lo, hi] is in
+    volume b (camera*C + cascade sweep); vols = (normals, points, counts, shared) from
+    ``culling_volumes``, the shared leading planes tested once per camera. Returns bits
+    [T, N] uint32."""
+    vn, vq, vm, shared = vols
+    n = lo.shape[0]
+    n_cam = shared.shape[1]
+    n_casc = vm.shape[1] // n_cam
+    bits = np.zeros((lmask.shape[0], n), np.uint32)
+    n_chunks = (n + 1023) // 1024
+    for ch in nb.prange(n_chunks):
+        lead = np.zeros(vm.shape[:2], np.int64)
+        lead_shared = np.zeros(shared.shape, np.int64)
+        for o in range(ch * 1024, min(n, (ch + 1) * 1024)):
+            if not casts[o]:
+                continue
+            for t in range(lmask.shape[0]):
+                if np.int64(omask[o]) & lmask[t] == 0:
+                    continue
+                acc = 0
+                for k in range(n_cam):
+                    b0 = k * n_casc
+                    inside, lead_shared[t, k] = _in_planes(vn, vq, t, b0, 0, shared[t, k],
+                                                           lead_shared[t, k], lo, hi, o)
+                    if not inside:
+                        continue
+                    for c in range(n_casc):
+                        b = b0 + c
+                        inside, lead[t, b] = _in_planes(vn, vq, t, b, shared[t, k], vm[t, b],
+                                                        lead[t, b], lo, hi, o)
+                        if inside:
+                            acc |= 1 << b
+                bits[t, o] = acc
+    return bits

@@ -114,6 +114,9 @@ def configs(draw) -> ls.Config:
         fade_out=draw(st.sampled_from([0.0, 0.1, 0.25, 1.0])),
         directional_in_slots=draw(st.booleans()),
         unshadowed=draw(st.sampled_from(["light", "light", "skip"])),
+        cascades=draw(st.integers(1, 4)),
+        shadow_distance=draw(st.sampled_from([150.0, 30.0, 5.0, 0.5])),
+        cascade_overlap=draw(st.sampled_from([0.1, 0.0, 0.5])),
     )
 
 

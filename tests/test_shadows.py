@@ -39,7 +39,9 @@ def test_tier_follows_projected_size_with_hysteresis(cls):
     s.set_lights(**point_lights([7], distance_for(395.0)))
     f = s.frame([CAM])
     assert f.shadow_lights.tolist() == [7] and f.shadow_tier.tolist() == [512]
-    assert f.caster_offsets.tolist() == [0, 0]
+    # The box holds the light: it meets all six cube-face pyramids.
+    assert f.caster_offsets.tolist() == [0, 1] and f.caster_ids.tolist() == [0]
+    assert f.caster_masks.tolist() == [0b111111]
 
     def move(s_px):
         z = distance_for(s_px)
