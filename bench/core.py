@@ -11,6 +11,12 @@ Every frame moves every light (``update_lights`` with new positions, not timed);
 Reported: median and p10..p90 of frame time, and the median of each stage of
 ``frame.stats["seconds"]``.
 
+The shadow stage (``--shadow-budgets 4,16``): per size, the city with the sun and 5% of
+the other lights shadowed, run with shadow_budget S = 4 and 16, and the same city with no
+shadowed light, interleaved run by run so the ratios come from the same minutes. Reported:
+the shadow stages (``shadows``: ranking and tiers; ``casters``: culling volumes and caster
+lists), their share of the no-shadow frame, and the frame-time difference.
+
 Then a small city runs through both ``lightsched.reference.Scheduler`` (the float64 oracle)
 and ``lightsched.Scheduler`` on the same frames: median times, their ratio, and the number
 of (frame, object) rows whose light_ids differ (0 expected; DESIGN section 4 allows
@@ -72,8 +78,9 @@ def fmt_count(n: int) -> str:
     return str(n)
 
 
-def make_scene(n: int, l: int, seed: int, shadows: bool) -> Any:
-    return city(n, l, seed=seed, shadow_fraction=0.01 if shadows else 0.0, sun_shadows=shadows)
+def make_scene(n: int, l: int, seed: int, shadows: bool, fraction: float = 0.01) -> Any:
+    return city(n, l, seed=seed, shadow_fraction=fraction if shadows else 0.0,
+                sun_shadows=shadows)
 
 
 def stage_names(seconds: list[dict[str, float]]) -> list[str]:
@@ -164,6 +171,45 @@ def bench_size(n: int, l: int, args: argparse.Namespace) -> dict[str, Any]:
     return r
 
 
+SHADOW_FRACTION = 0.05  # enough shadowed lights that S = 16 fills at (10k, 1k)
+
+
+def bench_shadow_stage(n: int, l: int, budgets: list[int], args: argparse.Namespace
+                       ) -> dict[str, Any]:
+    say(f"\n== shadow stage: N={fmt_count(n)}, L={fmt_count(l)}, S in {budgets}")
+    plain = make_scene(n, l, args.seed, False)
+    shadowed = make_scene(n, l, args.seed, True, SHADOW_FRACTION)
+    cases = [("none", plain, Config(max_lights=args.max_lights))]
+    cases += [(f"S={b}", shadowed, Config(max_lights=args.max_lights, shadow_budget=b))
+              for b in budgets]
+    got: dict[str, list[dict[str, Any]]] = {name: [] for name, _, _ in cases}
+    for run in range(args.runs):
+        for name, scene, cfg in cases:
+            got[name].append(run_sequence(lightsched.Scheduler, scene, cfg, args.frames,
+                                          args.warmup))
+        say(f"   run {run + 1}: " + ", ".join(
+            f"{k} {np.median(v[-1]['times']) * 1e3:.2f} ms" for k, v in got.items()))
+    out: dict[str, Any] = {"n": n, "l": l, "rows": []}
+    base = float(np.median([np.median(x["times"]) for x in got["none"]])) * 1e3
+    for name, _, _ in cases[1:]:
+        runs = got[name]
+        frame = float(np.median([np.median(x["times"]) for x in runs])) * 1e3
+        stage = {k: float(np.median([d.get(k, 0.0) for x in runs for d in x["seconds"]])) * 1e3
+                 for k in ("shadows", "casters")}
+        row = {"case": name, "shadow_lights": runs[-1]["shadow_lights"],
+               "caster_count": runs[-1]["casters"], "frame": frame, "base": base,
+               "shadows_ms": stage["shadows"], "casters_ms": stage["casters"],
+               "stage": stage["shadows"] + stage["casters"]}
+        row["share"] = row["stage"] / base
+        row["added"] = (frame - base) / base
+        out["rows"].append(row)
+        say(f"   {name}: {row['shadow_lights']} shadow lights, {row['caster_count']} casters; "
+            f"shadows {stage['shadows']:.2f} ms + casters {stage['casters']:.2f} ms = "
+            f"{row['stage']:.2f} ms ({100 * row['share']:.1f}% of the {base:.2f} ms frame "
+            f"without shadows); frame {frame:.2f} ms ({100 * row['added']:+.1f}%)")
+    return out
+
+
 def bench_compare(n: int, l: int, args: argparse.Namespace) -> dict[str, Any] | None:
     say(f"\n== oracle vs fast: N={fmt_count(n)}, L={fmt_count(l)}, {args.compare_frames} frames")
     try:
@@ -226,8 +272,8 @@ def git_commit() -> str:
         return "unknown"
 
 
-def render(results: list[dict[str, Any]], compare: dict[str, Any] | None,
-           args: argparse.Namespace) -> str:
+def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
+           compare: dict[str, Any] | None, args: argparse.Namespace) -> str:
     m = machine()
     cmd = "python bench/core.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
     shadows = "none" if args.no_shadows else "the sun and ~1% of the other lights"
@@ -254,6 +300,24 @@ def render(results: list[dict[str, Any]], compare: dict[str, Any] | None,
                  str(r["visible_objects"]), f"{r['mean_set']:.2f}"]
         out.append("| " + " | ".join(cells) + " |")
     out.append("")
+    if shadow:
+        out += ["Shadow stage: the same city with the sun and "
+                f"{100 * SHADOW_FRACTION:.0f}% of the other lights shadowed, at shadow_budget "
+                "S, against that city with no shadowed light, interleaved run by run "
+                "(medians as above). `shadows` ranks lights and picks tiers; `casters` builds "
+                "the culling volumes and caster lists. \"share\" is the shadow stages over "
+                "the no-shadow frame; \"frame +\" the frame-time difference.", "",
+                "| N | L | S | shadow lights | casters | shadows ms | casters ms | stage ms | "
+                "frame without shadows ms | frame ms | share | frame + |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for sh in shadow:
+            for r in sh["rows"]:
+                out.append(f"| {fmt_count(sh['n'])} | {fmt_count(sh['l'])} | {r['case'][2:]} | "
+                           f"{r['shadow_lights']} | {r['caster_count']} | {r['shadows_ms']:.2f} | "
+                           f"{r['casters_ms']:.2f} | "
+                           f"{r['stage']:.2f} | {r['base']:.2f} | {r['frame']:.2f} | "
+                           f"{100 * r['share']:.1f}% | {100 * r['added']:+.1f}% |")
+        out.append("")
     if compare is not None:
         out += ["Oracle (`lightsched.reference.Scheduler`) against the fast path on the same "
                 f"{compare['frames']} frames (medians over frames after the first):", "",
@@ -294,6 +358,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-lights", type=int, default=8, help="K (default 8)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-shadows", action="store_true", help="no light casts shadows")
+    p.add_argument("--shadow-budgets", type=str, default="4,16",
+                   help="shadow budgets S of the shadow-stage table, or 'none' (default 4,16)")
     p.add_argument("--compare", type=str, default="1000:100",
                    help="N:L of the oracle comparison, or 'none' (default 1000:100)")
     p.add_argument("--compare-frames", type=int, default=10,
@@ -307,12 +373,16 @@ def main(argv: list[str] | None = None) -> int:
     say(f"lightsched {lightsched.__version__} at {git_commit()}; {m['cpu']}, {m['nproc']} CPUs, "
         f"numba {m['numba']} ({m['numba_threads']} threads)")
     results = [bench_size(n, l, args) for n, l in args.sizes]
+    shadow = []
+    if args.shadow_budgets.strip().lower() != "none":
+        budgets = [int(b) for b in args.shadow_budgets.split(",")]
+        shadow = [bench_shadow_stage(n, l, budgets, args) for n, l in args.sizes]
     compare = None
     if args.compare.strip().lower() != "none":
         (cn, cl), = parse_sizes(args.compare)
         compare = bench_compare(cn, cl, args)
     if args.write:
-        write_results(render(results, compare, args))
+        write_results(render(results, shadow, compare, args))
     return 0
 
 

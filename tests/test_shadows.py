@@ -122,3 +122,4 @@ def test_no_shadow_maps_when_nothing_casts(cls):
     assert (f.slot_shadow == -1).all() and f.caster_offsets.tolist() == [0]
     if cls is ls.Scheduler:
         assert f.stats["plan"]["shadows"].startswith("skipped")
+        assert f.stats["plan"]["casters"].startswith("skipped")
