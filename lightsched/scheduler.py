@@ -3,7 +3,8 @@
 Takes the stores (scene.py) and cameras; returns a Frame (frame.py). Stages, each timed in
 stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid
 (its shape), order (visible objects by cell), prep (their records), pairs (Affects and P
-per light), group (pairs by object), objects (top-K and fade per object), output; pairs.py
+per light), shadows (ranking and tiers, shadows.py), casters (culling volumes and caster
+lists), group (pairs by object), objects (top-K and fade per object), output; pairs.py
 describes the light-major pipeline.
 The per-object state (slots, weights, last frame's selection) lives in the object store's
 ``state`` so it follows ids through set_/remove_ calls; the slot ids and states are the last
@@ -234,6 +235,8 @@ class Scheduler(SceneAPI):
                 "pairs": n_pairs,
                 "pair_bound": int(offsets[-1]),
                 "slots": int(frame.count.sum()),
+                "shadow_lights": int(shadow_rows.size),
+                "casters": int(casters[1].size),
                 "threads": nb.get_num_threads(),
             },
             "seconds": seconds,
