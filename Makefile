@@ -7,10 +7,10 @@ STAMP := $(VENV)/.installed
 
 .PHONY: test run lint bench clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml clients/python/pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip
-	$(BIN)/python -m pip install -e '.[dev]'
+	$(BIN)/python -m pip install -e clients/python -e '.[dev]'
 	touch $(STAMP)
 
 lint: $(STAMP)
@@ -20,7 +20,7 @@ test: $(STAMP) lint
 	$(BIN)/python -m pytest -n 2 -q
 
 run: $(STAMP)
-	$(BIN)/python -m lightsched demo
+	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
 
 bench: $(STAMP)
 	$(BIN)/python bench/core.py

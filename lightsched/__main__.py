@@ -1,6 +1,8 @@
-"""Command line: ``python -m lightsched demo`` (also the ``lightsched`` console script).
+"""Command line: ``python -m lightsched demo | serve`` (also the ``lightsched`` console
+script).
 
-The only module of the package that prints. ``demo`` builds the demo city
+The only module of the package that prints. ``serve`` runs the HTTP service
+(lightsched_server, imported only then: the core has no web imports). ``demo`` builds the demo city
 (``lightsched.scenes.demo_scene``), steps it with moving lights and prints what each frame
 returned, summarised, and where the time went (``frame.stats["seconds"]``).
 """
@@ -136,7 +138,32 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the float64 oracle lightsched.reference.Scheduler (slow)")
     d.add_argument("-v", "--verbose", action="store_true", help="print a line per frame")
     d.set_defaults(func=run_demo)
+    sv = sub.add_parser(
+        "serve", help="run the HTTP/msgpack service (needs the server extra)",
+        description="Serve the LightSched API (/v1, WebSocket streams, /docs, /metrics, "
+                    "/healthz). Limits and API keys come from LIGHTSCHED_* environment "
+                    "variables: LIGHTSCHED_API_KEYS (comma-separated) or LIGHTSCHED_API_KEYS_FILE "
+                    "(one per line) turn on 'Authorization: Bearer <key>'; "
+                    "LIGHTSCHED_MAX_BODY_BYTES, _MAX_LIGHTS, _MAX_OBJECTS, _MAX_SESSIONS, "
+                    "_SESSION_TTL (seconds idle) and _MAX_PENDING_FRAMES set the limits.")
+    sv.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1)")
+    sv.add_argument("--port", type=int, default=8080, help="TCP port (default 8080)")
+    sv.add_argument("--no-demo", action="store_true",
+                    help="do not preload the demo session (id 'demo')")
+    sv.add_argument("--log-level", default="info", help="uvicorn log level (default info)")
+    sv.set_defaults(func=run_serve)
     return p
+
+
+def run_serve(args: argparse.Namespace) -> int:
+    try:
+        from lightsched_server import serve
+    except ImportError as e:
+        print(f"lightsched serve needs the server extra (pip install 'lightsched[server]' and "
+              f"clients/python): {e}", file=sys.stderr)
+        return 2
+    serve(args.host, args.port, demo=not args.no_demo, log_level=args.log_level)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

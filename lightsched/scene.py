@@ -12,7 +12,9 @@ Directions are normalised here, once, so the fast path and the oracle see the sa
 
 from __future__ import annotations
 
+import copy
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -27,6 +29,10 @@ POINT, SPOT, DIRECTIONAL = 0, 1, 2
 # Fade states (DESIGN section 2, "Fade").
 OFF, FADING_IN, ON, FADING_OUT = 0, 1, 2, 3
 
+# The scene changes SceneAPI.apply runs (DESIGN section 7's calls).
+CHANGE_OPS = ("set_lights", "update_lights", "remove_lights", "set_objects", "update_objects",
+              "remove_objects")
+
 
 class ValidationError(ValueError):
     """Bad input: names the field and the first offending index (None when no row applies)."""
@@ -35,6 +41,7 @@ class ValidationError(ValueError):
         self.field = field
         self.index = index
         self.message = message
+        self.position: int | None = None  # which change of a SceneAPI.apply batch
         where = field if index is None else f"{field}[{index}]"
         super().__init__(f"{where}: {message}")
 
@@ -611,7 +618,11 @@ def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str,
     ids, rows = _id_rows(store.id, fields.pop("id", None), what)
     cols = validate(fields, store.columns(rows), ids.size)
     for f in names[1:]:
-        getattr(store, f)[rows] = cols[f]
+        # Copy on write: a store's arrays are never changed in place, so a shallow copy of
+        # the store is a snapshot (SceneAPI.apply rolls back to one).
+        arr = getattr(store, f).copy()
+        arr[rows] = cols[f]
+        setattr(store, f, arr)
     store.version += 1
 
 
@@ -661,6 +672,29 @@ class SceneAPI:
 
     def remove_objects(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
         self.objects.keep_rows(_keep_mask(self.objects.id, id, "object"))
+
+    def apply(self, changes: Iterable[tuple[str, dict[str, Any]]]) -> None:
+        """Runs a batch of scene changes, (method name, keyword fields) with the names of
+        CHANGE_OPS, in order and all or nothing: when one is rejected, its ValidationError
+        is raised with the position of the change in ``position`` and the scene is as it
+        was before the first (the service's frame request carries such a batch)."""
+        lights, objects = copy.copy(self.lights), copy.copy(self.objects)
+        objects.state = dict(self.objects.state)
+        for i, (op, given) in enumerate(changes):
+            try:
+                if op not in CHANGE_OPS:
+                    raise ValidationError("op", None, f"unknown change {op!r}; one of "
+                                          + ", ".join(CHANGE_OPS))
+                if not isinstance(given, dict):
+                    raise ValidationError("fields", None, "must be a mapping of field arrays")
+                getattr(self, op)(**given)
+            except ValidationError as e:
+                self.lights, self.objects = lights, objects
+                e.position = i
+                raise
+            except Exception:
+                self.lights, self.objects = lights, objects
+                raise
 
     def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False) -> Any:
         """Steps one frame (DESIGN section 2) and returns its Frame (section 3)."""

@@ -1,0 +1,406 @@
+"""Client of the LightSched service, mirroring the embedded API (DESIGN section 7).
+
+``Client(url, api_key=None)`` gives ``.schedule(lights, objects, cameras, config)`` and
+``.session(config)``, a RemoteScheduler with the methods of ``lightsched.Scheduler``:
+set_/update_/remove_ of lights and objects, and ``frame(cameras, dt, cut)`` returning a
+Frame with the same fields. Scene changes are kept until the next frame and travel with it
+in one round trip (all or nothing: if the service refuses one, none is applied and the
+frame raises). ``session(config, stream=True)`` sends frames over the session's WebSocket
+instead of HTTP. AsyncClient / AsyncRemoteScheduler are the asyncio versions. HTTP
+connections are kept alive between calls.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass, field
+from typing import Any
+
+import httpx
+import numpy as np
+
+from .wire import JSON, MSGPACK, dumps, loads, media_type
+
+FRAME_FIELDS = ("object_id", "visible", "count", "candidates", "light_ids", "light_index",
+                "priority", "fade_weight", "fade_state", "slot_shadow", "directional_lights",
+                "visible_lights", "shadow_lights", "shadow_tier", "cascade_splits",
+                "caster_offsets", "caster_ids", "caster_masks")
+# Per-object arrays and their empty-slot value (DESIGN section 3).
+PER_OBJECT = {"visible": False, "count": 0, "candidates": 0, "light_ids": -1, "light_index": -1,
+              "priority": 0, "fade_weight": 0, "fade_state": 0, "slot_shadow": -1}
+CAMERA_FIELDS = ("id", "position", "forward", "up", "fov_y", "aspect", "near", "far", "focus",
+                 "height_px")
+
+
+@dataclass
+class Frame:
+    """One frame (DESIGN section 3): the arrays asked for (others None), stats, and the
+    session's frame index."""
+
+    object_id: np.ndarray | None = None
+    visible: np.ndarray | None = None
+    count: np.ndarray | None = None
+    candidates: np.ndarray | None = None
+    light_ids: np.ndarray | None = None
+    light_index: np.ndarray | None = None
+    priority: np.ndarray | None = None
+    fade_weight: np.ndarray | None = None
+    fade_state: np.ndarray | None = None
+    slot_shadow: np.ndarray | None = None
+    directional_lights: np.ndarray | None = None
+    visible_lights: np.ndarray | None = None
+    shadow_lights: np.ndarray | None = None
+    shadow_tier: np.ndarray | None = None
+    cascade_splits: np.ndarray | None = None
+    caster_offsets: np.ndarray | None = None
+    caster_ids: np.ndarray | None = None
+    caster_masks: np.ndarray | None = None
+    stats: dict[str, Any] = field(default_factory=dict)
+    frame_index: int = 0
+
+
+class RemoteError(Exception):
+    """The service refused a call: ``status`` and the problem document (RFC 9457)."""
+
+    def __init__(self, status: int, problem: dict[str, Any]) -> None:
+        self.status = status
+        self.problem = problem
+        super().__init__(f"{status} {problem.get('title', '')}: {problem.get('detail', '')}")
+
+
+class ValidationError(RemoteError, ValueError):
+    """Bad input (422): ``field`` and ``index`` as lightsched.ValidationError has them."""
+
+    def __init__(self, status: int, problem: dict[str, Any]) -> None:
+        super().__init__(status, problem)
+        self.field = problem.get("field")
+        self.index = problem.get("index")
+        self.message = problem.get("detail", "")
+
+
+def _error(status: int, problem: Any) -> RemoteError:
+    doc = problem if isinstance(problem, dict) else {"detail": str(problem)}
+    return (ValidationError if status == 422 else RemoteError)(status, doc)
+
+
+def _array(value: Any) -> Any:
+    return value if isinstance(value, np.ndarray) else np.asarray(value)
+
+
+def camera_doc(cam: Any) -> dict[str, Any]:
+    """A camera (lightsched.Camera, any object with its attributes, or a mapping) as a
+    wire map."""
+    get = cam.get if isinstance(cam, dict) else (lambda k, d=None: getattr(cam, k, d))
+    doc: dict[str, Any] = {}
+    for name in CAMERA_FIELDS:
+        value = get(name, None)
+        if value is None:
+            continue
+        if name in ("position", "forward", "up", "focus"):
+            doc[name] = np.asarray(value, dtype=np.float64)
+        elif name == "id":
+            doc[name] = int(value)
+        else:
+            doc[name] = float(value)
+    return doc
+
+
+def config_doc(config: Any) -> dict[str, Any] | None:
+    """None, a mapping, or lightsched.Config (anything with to_dict())."""
+    if config is None:
+        return None
+    given = config.to_dict() if hasattr(config, "to_dict") else dict(config)
+    out = {}
+    for k, v in given.items():
+        if v is None:
+            continue
+        out[k] = v.item() if isinstance(v, np.generic) else v
+    return out
+
+
+def fields_doc(fields: dict[str, Any]) -> dict[str, Any]:
+    return {k: _array(v) for k, v in fields.items() if v is not None}
+
+
+def merge_changed(prev: Frame | None, doc: dict[str, Any]) -> Frame:
+    """The full frame from a changed_only answer and the previous full frame: per-object
+    arrays keep the previous values of ids that did not change (aligned by id)."""
+    ids = doc.get("object_id")
+    if ids is None:
+        ids = prev.object_id if prev is not None else np.zeros(0, np.int32)
+    rows = doc["rows"]
+    f = Frame(stats=doc.get("stats", {}), frame_index=doc["frame_index"], object_id=ids)
+    for name in FRAME_FIELDS:
+        if name == "object_id" or name not in doc:
+            continue
+        part = doc[name]
+        if name not in PER_OBJECT:
+            setattr(f, name, part)
+            continue
+        full = np.full((ids.size,) + part.shape[1:], PER_OBJECT[name], dtype=part.dtype)
+        old = getattr(prev, name, None) if prev is not None else None
+        if old is not None and prev is not None and prev.object_id.size:
+            pos = np.minimum(np.searchsorted(prev.object_id, ids), prev.object_id.size - 1)
+            kept = prev.object_id[pos] == ids
+            full[kept] = old[pos[kept]]
+        full[np.searchsorted(ids, rows)] = part
+        setattr(f, name, full)
+    return f
+
+
+def frame_of(doc: dict[str, Any], prev: Frame | None = None) -> Frame:
+    if doc.get("changed_only"):
+        return merge_changed(prev, doc)
+    f = Frame(stats=doc.get("stats", {}), frame_index=doc["frame_index"])
+    for name in FRAME_FIELDS:
+        if name in doc:
+            setattr(f, name, doc[name])
+    return f
+
+
+class _Changes:
+    """The embedded API's scene calls, kept until the next frame."""
+
+    def __init__(self) -> None:
+        self._changes: list[dict[str, Any]] = []
+
+    def set_lights(self, **fields: Any) -> None:
+        self._changes.append({"op": "set_lights", "fields": fields_doc(fields)})
+
+    def update_lights(self, **fields: Any) -> None:
+        self._changes.append({"op": "update_lights", "fields": fields_doc(fields)})
+
+    def remove_lights(self, id: Any) -> None:  # noqa: A002 - the embedded API's keyword
+        self._changes.append({"op": "remove_lights", "fields": {"id": _array(id)}})
+
+    def set_objects(self, **fields: Any) -> None:
+        self._changes.append({"op": "set_objects", "fields": fields_doc(fields)})
+
+    def update_objects(self, **fields: Any) -> None:
+        self._changes.append({"op": "update_objects", "fields": fields_doc(fields)})
+
+    def remove_objects(self, id: Any) -> None:  # noqa: A002
+        self._changes.append({"op": "remove_objects", "fields": {"id": _array(id)}})
+
+    def _request(self, cameras: Any, dt: float, cut: bool, outputs: list[str] | None,
+                 changed_only: bool) -> dict[str, Any]:
+        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
+            cameras = [cameras]
+        doc: dict[str, Any] = {"dt": float(dt), "cut": bool(cut),
+                               "cameras": [camera_doc(c) for c in cameras],
+                               "changes": self._changes}
+        self._changes = []  # sent: applied with the frame, or dropped with it
+        if outputs is not None:
+            doc["outputs"] = list(outputs)
+        if changed_only:
+            doc["changed_only"] = True
+        return doc
+
+
+def _headers(api_key: str | None, kind: str) -> dict[str, str]:
+    h = {"Accept": kind, "Content-Type": kind}
+    if api_key:
+        h["Authorization"] = f"Bearer {api_key}"
+    return h
+
+
+def _decode(response: httpx.Response) -> Any:
+    kind = media_type(response.headers.get("content-type")) or JSON
+    doc = loads(response.content, kind) if response.content else None
+    if response.status_code >= 400:
+        raise _error(response.status_code, doc)
+    return doc
+
+
+def _ws_url(base: str, sid: str) -> str:
+    return base.replace("http://", "ws://").replace("https://", "wss://").rstrip("/") + \
+        f"/v1/sessions/{sid}/stream"
+
+
+class Client:
+    """Synchronous client; one kept-alive HTTP connection pool."""
+
+    def __init__(self, url: str, api_key: str | None = None, encoding: str = MSGPACK,
+                 timeout: float = 60.0) -> None:
+        self.url = url.rstrip("/")
+        self.api_key = api_key
+        self.kind = media_type(encoding) or MSGPACK
+        self._http = httpx.Client(base_url=self.url, headers=_headers(api_key, self.kind),
+                                  timeout=timeout)
+
+    def call(self, method: str, path: str, doc: Any = None) -> Any:
+        content = dumps(doc, self.kind) if doc is not None else None
+        return _decode(self._http.request(method, path, content=content))
+
+    def schedule(self, lights: dict[str, Any], objects: dict[str, Any], cameras: Any,
+                 config: Any = None, outputs: list[str] | None = None) -> Frame:
+        """The stateless one-frame call (lightsched.schedule)."""
+        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
+            cameras = [cameras]
+        doc: dict[str, Any] = {"lights": fields_doc(lights), "objects": fields_doc(objects),
+                               "cameras": [camera_doc(c) for c in cameras]}
+        if config is not None:
+            doc["config"] = config_doc(config)
+        if outputs is not None:
+            doc["outputs"] = list(outputs)
+        return frame_of(self.call("POST", "/v1/schedule", doc))
+
+    def session(self, config: Any = None, stream: bool = False) -> RemoteScheduler:
+        """A new session (a remote lightsched.Scheduler)."""
+        info = self.call("POST", "/v1/sessions", {"config": config_doc(config)}
+                         if config is not None else {})
+        return RemoteScheduler(self, info, stream)
+
+    def health(self) -> Any:
+        return self.call("GET", "/healthz")
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+class RemoteScheduler(_Changes):
+    """A session: the methods of lightsched.Scheduler, computed by the service."""
+
+    def __init__(self, client: Client, info: dict[str, Any], stream: bool = False) -> None:
+        super().__init__()
+        self.client = client
+        self.id: str = info["id"]
+        self.config: dict[str, Any] = info["config"]
+        self.frame_index: int = info["frame_index"]
+        self._last: Frame | None = None
+        self._ws: Any = None
+        self.stream = stream
+
+    def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
+              outputs: list[str] | None = None, changed_only: bool = False) -> Frame:
+        doc = self._request(cameras, dt, cut, outputs, changed_only)
+        if self.stream:
+            answer = self._stream_call(doc)
+        else:
+            answer = self.client.call("POST", f"/v1/sessions/{self.id}/frames", doc)
+        f = frame_of(answer, self._last)
+        self._last = f
+        self.frame_index = f.frame_index + 1
+        return f
+
+    def _stream_call(self, doc: dict[str, Any]) -> Any:
+        from websockets.sync.client import connect
+
+        if self._ws is None:
+            headers = {"Authorization": f"Bearer {self.client.api_key}"} \
+                if self.client.api_key else None
+            self._ws = connect(_ws_url(self.client.url, self.id), additional_headers=headers,
+                               max_size=None)
+        self._ws.send(dumps(doc, MSGPACK))
+        answer = loads(self._ws.recv(), MSGPACK)
+        if "frame_index" not in answer:
+            raise _error(int(answer.get("status", 400)), answer)
+        return answer
+
+    def info(self) -> dict[str, Any]:
+        return self.client.call("GET", f"/v1/sessions/{self.id}")
+
+    def close(self, delete: bool = True) -> None:
+        """Closes the stream and (by default) deletes the session."""
+        if self._ws is not None:
+            self._ws.close()
+            self._ws = None
+        if delete:
+            self.client.call("DELETE", f"/v1/sessions/{self.id}")
+
+
+class AsyncClient:
+    """The asyncio client (httpx.AsyncClient, kept-alive connections)."""
+
+    def __init__(self, url: str, api_key: str | None = None, encoding: str = MSGPACK,
+                 timeout: float = 60.0) -> None:
+        self.url = url.rstrip("/")
+        self.api_key = api_key
+        self.kind = media_type(encoding) or MSGPACK
+        self._http = httpx.AsyncClient(base_url=self.url, headers=_headers(api_key, self.kind),
+                                       timeout=timeout)
+
+    async def call(self, method: str, path: str, doc: Any = None) -> Any:
+        content = dumps(doc, self.kind) if doc is not None else None
+        return _decode(await self._http.request(method, path, content=content))
+
+    async def schedule(self, lights: dict[str, Any], objects: dict[str, Any], cameras: Any,
+                       config: Any = None, outputs: list[str] | None = None) -> Frame:
+        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
+            cameras = [cameras]
+        doc: dict[str, Any] = {"lights": fields_doc(lights), "objects": fields_doc(objects),
+                               "cameras": [camera_doc(c) for c in cameras]}
+        if config is not None:
+            doc["config"] = config_doc(config)
+        if outputs is not None:
+            doc["outputs"] = list(outputs)
+        return frame_of(await self.call("POST", "/v1/schedule", doc))
+
+    async def session(self, config: Any = None, stream: bool = False) -> AsyncRemoteScheduler:
+        info = await self.call("POST", "/v1/sessions", {"config": config_doc(config)}
+                               if config is not None else {})
+        return AsyncRemoteScheduler(self, info, stream)
+
+    async def close(self) -> None:
+        await self._http.aclose()
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(self, *exc: Any) -> None:
+        await self.close()
+
+
+class AsyncRemoteScheduler(_Changes):
+    """RemoteScheduler for asyncio: ``await s.frame(...)``."""
+
+    def __init__(self, client: AsyncClient, info: dict[str, Any], stream: bool = False) -> None:
+        super().__init__()
+        self.client = client
+        self.id: str = info["id"]
+        self.config: dict[str, Any] = info["config"]
+        self.frame_index: int = info["frame_index"]
+        self._last: Frame | None = None
+        self._ws: Any = None
+        self._lock = asyncio.Lock()
+        self.stream = stream
+
+    async def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
+                    outputs: list[str] | None = None, changed_only: bool = False) -> Frame:
+        doc = self._request(cameras, dt, cut, outputs, changed_only)
+        async with self._lock:  # one frame at a time: the reply order is the send order
+            if self.stream:
+                answer = await self._stream_call(doc)
+            else:
+                answer = await self.client.call("POST", f"/v1/sessions/{self.id}/frames", doc)
+            f = frame_of(answer, self._last)
+            self._last = f
+            self.frame_index = f.frame_index + 1
+            return f
+
+    async def _stream_call(self, doc: dict[str, Any]) -> Any:
+        from websockets.asyncio.client import connect
+
+        if self._ws is None:
+            headers = {"Authorization": f"Bearer {self.client.api_key}"} \
+                if self.client.api_key else None
+            self._ws = await connect(_ws_url(self.client.url, self.id),
+                                     additional_headers=headers, max_size=None)
+        await self._ws.send(dumps(doc, MSGPACK))
+        answer = loads(await self._ws.recv(), MSGPACK)
+        if "frame_index" not in answer:
+            raise _error(int(answer.get("status", 400)), answer)
+        return answer
+
+    async def close(self, delete: bool = True) -> None:
+        if self._ws is not None:
+            await self._ws.close()
+            self._ws = None
+        if delete:
+            await self.client.call("DELETE", f"/v1/sessions/{self.id}")

@@ -1,0 +1,254 @@
+"""The service core, free of HTTP: sessions, limits, request documents in, response
+documents out. app.py translates HTTP and WebSocket traffic to these calls.
+
+A frame request runs in this order: structure check (models.py), camera and dt check,
+the scene changes all or nothing (``Scheduler.apply``), the per-session size limits, the
+frame. Anything refused raises a Problem and leaves the session as it was. Frames of one
+session run one at a time in arrival order (an asyncio lock, FIFO); the compute runs in a
+worker thread (the numba kernels release the GIL), so different sessions run in parallel.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import secrets
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import anyio
+import numpy as np
+from pydantic import BaseModel
+from pydantic import ValidationError as PydanticError
+
+import lightsched as ls
+from lightsched.frame import FRAME_ARRAYS
+from lightsched.scene import validate_cameras, validate_dt
+
+from .metrics import Metrics
+from .models import FrameRequest, ScheduleRequest, SessionRequest
+from .problems import Problem, invalid, not_found
+from .settings import Settings
+
+PER_OBJECT = ("visible", "count", "candidates", "light_ids", "light_index", "priority",
+              "fade_weight", "fade_state", "slot_shadow")
+# What "changed" means for changed_only: the set, its order, weights and states (DESIGN's
+# per-object outputs except priority, which moves whenever a light does).
+CHANGE_KEYS = ("visible", "count", "candidates", "light_ids", "light_index", "fade_weight",
+               "fade_state", "slot_shadow")
+
+
+def parse(model: type[BaseModel], doc: Any) -> Any:
+    """The request document checked against its model; 422 naming the first bad part."""
+    if not isinstance(doc, dict):
+        raise Problem(422, "validation", "Invalid input", "the request must be a map",
+                      pointer="")
+    try:
+        return model.model_validate(doc)
+    except PydanticError as e:
+        err = e.errors()[0]
+        loc = [str(p) for p in err["loc"]]
+        names = [p for p in loc if not p.isdigit()]
+        index = next((int(p) for p in reversed(loc) if p.isdigit()), None)
+        raise Problem(422, "validation", "Invalid input",
+                      f"{'.'.join(loc) or 'request'}: {err['msg']}",
+                      field=".".join(names) or None, index=index,
+                      pointer="/" + "/".join(loc)) from None
+
+
+def config_of(model: Any) -> ls.Config:
+    given = {} if model is None else model.model_dump(exclude_none=True)
+    try:
+        return ls.Config(**given)
+    except ls.ValidationError as e:
+        raise invalid(e, "/config") from None
+
+
+def cameras_of(req: Any) -> list[ls.Camera]:
+    try:
+        return validate_cameras([c.model_dump() for c in req.cameras])
+    except ls.ValidationError as e:
+        raise invalid(e) from None
+
+
+def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
+                   prev: ls.Frame | None = None) -> dict[str, Any]:
+    """The response map of a frame: the arrays asked for (all by default) and stats; with
+    ``prev`` (changed_only), per-object arrays only for the changed rows."""
+    names = list(FRAME_ARRAYS) if outputs is None else [n for n in FRAME_ARRAYS if n in outputs]
+    doc: dict[str, Any] = {"frame_index": frame_index, "changed_only": prev is not None}
+    if prev is None:
+        for name in names:
+            doc[name] = getattr(f, name)
+        doc["stats"] = f.stats
+        return doc
+    same_set = np.array_equal(prev.object_id, f.object_id)
+    if same_set:
+        changed = np.zeros(f.object_id.size, bool)
+        for key in CHANGE_KEYS:
+            a, b = getattr(f, key), getattr(prev, key)
+            diff = a != b
+            changed |= diff.reshape(diff.shape[0], -1).any(axis=1) if diff.ndim > 1 else diff
+    else:
+        # Rows of ids kept from the previous frame are compared; new ids always change.
+        pos = np.searchsorted(prev.object_id, f.object_id)
+        pos_c = np.minimum(pos, max(prev.object_id.size - 1, 0))
+        kept = (pos < prev.object_id.size) & (prev.object_id[pos_c] == f.object_id) \
+            if prev.object_id.size else np.zeros(f.object_id.size, bool)
+        changed = ~kept
+        for key in CHANGE_KEYS:
+            a, b = getattr(f, key)[kept], getattr(prev, key)[pos_c[kept]]
+            diff = a != b
+            changed[kept] |= diff.reshape(diff.shape[0], -1).any(axis=1) if diff.ndim > 1 \
+                else diff
+    rows = np.flatnonzero(changed)
+    doc["rows"] = f.object_id[rows]
+    for name in names:
+        if name == "object_id":
+            if not same_set:
+                doc["object_id"] = f.object_id
+        elif name in PER_OBJECT:
+            doc[name] = getattr(f, name)[rows]
+        else:
+            doc[name] = getattr(f, name)
+    doc["stats"] = f.stats
+    return doc
+
+
+@dataclass
+class Session:
+    id: str
+    owner: str | None
+    scheduler: ls.Scheduler
+    lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    pending: int = 0
+    last_used: float = field(default_factory=time.monotonic)
+    prev: ls.Frame | None = None
+
+    def info(self) -> dict[str, Any]:
+        s = self.scheduler
+        return {"id": self.id, "config": s.config.to_dict(), "frame_index": s.frame_index,
+                "lights": len(s.lights), "objects": len(s.objects),
+                "idle_seconds": time.monotonic() - self.last_used}
+
+
+class Service:
+    """Sessions and the calls of the API, on decoded request documents."""
+
+    def __init__(self, settings: Settings | None = None) -> None:
+        self.settings = settings or Settings()
+        self.sessions: dict[str, Session] = {}
+        self.metrics = Metrics()
+
+    # ------------------------------------------------------------------ sessions
+    def evict_idle(self) -> None:
+        now = time.monotonic()
+        for sid in [k for k, s in self.sessions.items()
+                    if s.pending == 0 and now - s.last_used > self.settings.session_ttl]:
+            del self.sessions[sid]
+
+    def create_session(self, doc: Any, owner: str | None, sid: str | None = None) -> Session:
+        self.evict_idle()
+        req = parse(SessionRequest, doc if doc is not None else {})
+        config = config_of(req.config)
+        if len(self.sessions) >= self.settings.max_sessions:
+            raise Problem(429, "too-many-sessions", "Too many sessions",
+                          f"the service holds at most {self.settings.max_sessions} sessions",
+                          headers={"Retry-After": "1"})
+        sid = sid or secrets.token_urlsafe(24)  # 192 random bits: unguessable
+        session = self.sessions[sid] = Session(sid, owner, ls.Scheduler(config))
+        return session
+
+    def session(self, sid: str, owner: str | None) -> Session:
+        self.evict_idle()
+        s = self.sessions.get(sid)
+        # Another key's session is as invisible as one that does not exist.
+        if s is None or s.owner != owner:
+            raise not_found(f"no session {sid!r}")
+        s.last_used = time.monotonic()
+        return s
+
+    def delete_session(self, sid: str, owner: str | None) -> None:
+        self.session(sid, owner)
+        del self.sessions[sid]
+
+    # ------------------------------------------------------------------ frames
+    async def frame(self, sid: str, owner: str | None, doc: Any) -> dict[str, Any]:
+        """One frame request of a session: changes, then the frame (see the module doc)."""
+        s = self.session(sid, owner)
+        req = parse(FrameRequest, doc)
+        cams = cameras_of(req)
+        try:
+            dt = validate_dt(req.dt)
+        except ls.ValidationError as e:
+            raise invalid(e) from None
+        if s.pending >= self.settings.max_pending_frames:
+            raise Problem(429, "session-busy", "Session busy",
+                          f"{s.pending} frames of session {sid!r} are already waiting",
+                          headers={"Retry-After": "0"})
+        s.pending += 1
+        try:
+            async with s.lock:
+                return await anyio.to_thread.run_sync(self._step, s, req, cams, dt)
+        finally:
+            s.pending -= 1
+            s.last_used = time.monotonic()
+
+    def _step(self, s: Session, req: Any, cams: list[ls.Camera], dt: float) -> dict[str, Any]:
+        sched = s.scheduler
+        before = (sched.lights, sched.objects)
+        try:
+            sched.apply([(c.op, c.fields) for c in req.changes])
+        except ls.ValidationError as e:
+            raise invalid(e) from None
+        limits = self.settings
+        for what, n, cap in (("lights", len(sched.lights), limits.max_lights),
+                             ("objects", len(sched.objects), limits.max_objects)):
+            if n > cap:
+                sched.lights, sched.objects = before
+                raise Problem(413, "too-large", "Scene too large",
+                              f"a session holds at most {cap} {what}; this frame would make "
+                              f"{n}", field=what)
+        f = sched.frame(cams, dt=dt, cut=req.cut)
+        self.metrics.observe_frame(f.stats)
+        doc = frame_document(f, req.outputs, sched.frame_index - 1,
+                             s.prev if req.changed_only else None)
+        s.prev = f
+        return doc
+
+    async def schedule(self, doc: Any) -> dict[str, Any]:
+        """POST /v1/schedule: the stateless one-frame call."""
+        req = parse(ScheduleRequest, doc)
+        config = config_of(req.config)
+        cams = cameras_of(req)
+        for what, n, cap in (("lights", _rows(req.lights), self.settings.max_lights),
+                             ("objects", _rows(req.objects), self.settings.max_objects)):
+            if n > cap:
+                raise Problem(413, "too-large", "Scene too large",
+                              f"at most {cap} {what} per request, got {n}", field=what)
+
+        def run() -> dict[str, Any]:
+            # ls.schedule's steps, so that an error points into lights or objects.
+            sched = ls.Scheduler(config)
+            for base, call, given in (("/lights", sched.set_lights, req.lights),
+                                      ("/objects", sched.set_objects, req.objects)):
+                try:
+                    call(**given)
+                except ls.ValidationError as e:
+                    raise invalid(e, base) from None
+            f = sched.frame(cams, dt=0.0, cut=True)
+            self.metrics.observe_frame(f.stats)
+            return frame_document(f, req.outputs, 0)
+
+        return await anyio.to_thread.run_sync(run)
+
+
+def _rows(fields: dict[str, Any]) -> int:
+    ids = fields.get("id")
+    try:
+        return len(ids) if ids is not None else 0
+    except TypeError:
+        return 0
+
+
+__all__ = ["Service", "Session", "frame_document", "parse"]
