@@ -103,14 +103,7 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
             raise Problem(400, "malformed", "Malformed body", e.message,
                           pointer=e.pointer) from None
 
-    @app.middleware("http")
-    async def observe(request: Request, call_next: Any) -> Response:
-        t = time.perf_counter()
-        response = await call_next(request)
-        route = request.scope.get("route")
-        service.metrics.observe_request(getattr(route, "path", "unmatched"),
-                                        response.status_code, time.perf_counter() - t)
-        return response
+    app.add_middleware(Observe, metrics=service.metrics)
 
     @app.exception_handler(Problem)
     async def on_problem(request: Request, p: Problem) -> Response:
@@ -168,7 +161,19 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         nothing), then one frame; the arrays asked for, or only the changed rows."""
         key = key_of(request.headers, cfg)
         service.session(sid, key)
-        return reply(request, await service.frame(sid, key, await read_doc(request)))
+        t0 = time.perf_counter()
+        doc = await read_doc(request)
+        t1 = time.perf_counter()
+        answer = await service.frame(sid, key, doc)
+        t2 = time.perf_counter()
+        response = reply(request, answer)
+        t3 = time.perf_counter()
+        # Where the server's time went (read and decode, frame, encode), for clients and
+        # bench/service.py to split a round trip.
+        response.headers["Server-Timing"] = (f"decode;dur={(t1 - t0) * 1e3:.3f}, "
+                                             f"frame;dur={(t2 - t1) * 1e3:.3f}, "
+                                             f"encode;dur={(t3 - t2) * 1e3:.3f}")
+        return response
 
     @app.websocket("/v1/sessions/{sid}/stream")
     async def stream(ws: WebSocket, sid: str) -> None:
@@ -232,6 +237,35 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
     return app
 
 
+class Observe:
+    """Pure ASGI middleware: latency and status of every HTTP response into the metrics
+    (Starlette's BaseHTTPMiddleware would add a task and a stream per request)."""
+
+    def __init__(self, app: Any, metrics: Any) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t = time.perf_counter()
+        status = 500
+
+        async def send_status(message: dict[str, Any]) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_status)
+        finally:
+            route = scope.get("route")
+            self.metrics.observe_request(getattr(route, "path", "unmatched"), status,
+                                         time.perf_counter() - t)
+
+
 def _title(name: str) -> str:
     return SCHEMAS[name].__name__
 
@@ -261,5 +295,12 @@ def serve(host: str = "127.0.0.1", port: int = 8080, demo: bool = True,
     print(f"LightSched {lightsched.__version__} on http://{host}:{port} "
           f"(docs: http://{host}:{port}/docs"
           + (", demo session id 'demo'" if demo else "") + ")", flush=True)
-    uvicorn.run(app, host=host, port=port, log_level=log_level, ws_max_size=settings.max_body_bytes,
-                http="httptools", loop="uvloop")
+    uvicorn.run(app, **uvicorn_options(settings), host=host, port=port, log_level=log_level)
+
+
+def uvicorn_options(settings: Settings) -> dict[str, Any]:
+    """uvicorn settings the service relies on: the C HTTP parser and event loop, messages
+    as large as bodies, and no permessage-deflate (arrays barely compress, and deflating a
+    frame costs more than sending it)."""
+    return {"http": "httptools", "loop": "uvloop", "ws_max_size": settings.max_body_bytes,
+            "ws_per_message_deflate": False}

@@ -95,7 +95,8 @@ class FrameRequest(BaseModel):
     """POST /v1/sessions/{id}/frames and each WebSocket message: scene changes, then one
     frame. ``outputs`` names the arrays wanted (default all); ``changed_only`` sends the
     per-object arrays only for the objects whose set, order, weights or states changed since
-    the session's previous frame (``rows`` lists them)."""
+    the session's previous frame (``rows`` lists them); ``stats`` false leaves out the
+    plan, counts and timings (the golden examples do, to be byte-for-byte repeatable)."""
 
     model_config = STRICT
     dt: float = 1.0 / 60.0
@@ -104,6 +105,7 @@ class FrameRequest(BaseModel):
     changes: list[Change] = []
     outputs: list[OutputName] | None = None
     changed_only: bool = False
+    stats: bool = True
 
 
 class ScheduleRequest(BaseModel):
@@ -115,6 +117,7 @@ class ScheduleRequest(BaseModel):
     cameras: list[CameraModel] = Field(min_length=1, max_length=8)
     config: ConfigModel | None = None
     outputs: list[OutputName] | None = None
+    stats: bool = True
 
 
 class SessionRequest(BaseModel):
@@ -143,7 +146,7 @@ class FrameResponse(BaseModel):
     frame_index: int
     changed_only: bool = False
     rows: WireArray | None = None
-    stats: dict[str, Any]
+    stats: dict[str, Any] | None = None
     object_id: WireArray | None = None
     visible: WireArray | None = None
     count: WireArray | None = None

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import anyio
+import numba as nb
 import numpy as np
 from pydantic import BaseModel
 from pydantic import ValidationError as PydanticError
@@ -72,7 +73,7 @@ def cameras_of(req: Any) -> list[ls.Camera]:
 
 
 def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
-                   prev: ls.Frame | None = None) -> dict[str, Any]:
+                   prev: ls.Frame | None = None, stats: bool = True) -> dict[str, Any]:
     """The response map of a frame: the arrays asked for (all by default) and stats; with
     ``prev`` (changed_only), per-object arrays only for the changed rows."""
     names = list(FRAME_ARRAYS) if outputs is None else [n for n in FRAME_ARRAYS if n in outputs]
@@ -80,7 +81,8 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
     if prev is None:
         for name in names:
             doc[name] = getattr(f, name)
-        doc["stats"] = f.stats
+        if stats:
+            doc["stats"] = f.stats
         return doc
     same_set = np.array_equal(prev.object_id, f.object_id)
     if same_set:
@@ -111,7 +113,8 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
             doc[name] = getattr(f, name)[rows]
         else:
             doc[name] = getattr(f, name)
-    doc["stats"] = f.stats
+    if stats:
+        doc["stats"] = f.stats
     return doc
 
 
@@ -189,6 +192,8 @@ class Service:
         s.pending += 1
         try:
             async with s.lock:
+                if self._small(s.scheduler, req):
+                    return self._step(s, req, cams, dt)
                 return await anyio.to_thread.run_sync(self._step, s, req, cams, dt)
         finally:
             s.pending -= 1
@@ -209,12 +214,31 @@ class Service:
                 raise Problem(413, "too-large", "Scene too large",
                               f"a session holds at most {cap} {what}; this frame would make "
                               f"{n}", field=what)
-        f = sched.frame(cams, dt=dt, cut=req.cut)
+        f = self._run_frame(sched, cams, dt, req.cut)
         self.metrics.observe_frame(f.stats)
         doc = frame_document(f, req.outputs, sched.frame_index - 1,
-                             s.prev if req.changed_only else None)
+                             s.prev if req.changed_only else None, req.stats)
         s.prev = f
         return doc
+
+    def _small(self, sched: ls.Scheduler, req: Any) -> bool:
+        """A frame small enough to run on the event loop: below small_scene objects (before
+        and after its changes, as far as set_objects tells) it is mostly GIL-holding Python
+        around short kernels, so a worker thread would not run it beside other sessions,
+        and the hop there and back costs about as much as the frame."""
+        limit = self.settings.small_scene
+        if len(sched.objects) >= limit:
+            return False
+        return not any(c.op == "set_objects" and _rows(c.fields) >= limit for c in req.changes)
+
+    def _run_frame(self, sched: ls.Scheduler, cams: list[ls.Camera], dt: float,
+                   cut: bool) -> ls.Frame:
+        """sched.frame with this worker thread's numba thread count set (numba's count is
+        per calling thread): Settings.frame_threads, or by scene size."""
+        n = self.settings.frame_threads or (
+            1 if len(sched.objects) < self.settings.small_scene else nb.config.NUMBA_NUM_THREADS)
+        nb.set_num_threads(min(n, nb.config.NUMBA_NUM_THREADS))
+        return sched.frame(cams, dt=dt, cut=cut)
 
     async def schedule(self, doc: Any) -> dict[str, Any]:
         """POST /v1/schedule: the stateless one-frame call."""
@@ -236,9 +260,9 @@ class Service:
                     call(**given)
                 except ls.ValidationError as e:
                     raise invalid(e, base) from None
-            f = sched.frame(cams, dt=0.0, cut=True)
+            f = self._run_frame(sched, cams, 0.0, True)
             self.metrics.observe_frame(f.stats)
-            return frame_document(f, req.outputs, 0)
+            return frame_document(f, req.outputs, 0, stats=req.stats)
 
         return await anyio.to_thread.run_sync(run)
 

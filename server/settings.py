@@ -12,8 +12,11 @@ class Settings:
     """max_body_bytes: largest request body (413 above). max_lights / max_objects: per
     session (413 above). max_sessions: live sessions (429 above). session_ttl: seconds a
     session may stay idle before it is dropped. max_pending_frames: frames of one session
-    waiting for it (they run in arrival order; 429 above). api_keys: when set, every /v1
-    call needs ``Authorization: Bearer <key>``."""
+    waiting for it (they run in arrival order; 429 above). frame_threads: numba threads
+    per frame; 0 picks one thread below small_scene objects (waking a second core costs a
+    small frame more in latency tails than it saves, and sessions run side by side anyway)
+    and every thread above. api_keys: when set, every /v1 call needs
+    ``Authorization: Bearer <key>``."""
 
     max_body_bytes: int = 64 * 1024 * 1024
     max_lights: int = 1_000_000
@@ -21,6 +24,8 @@ class Settings:
     max_sessions: int = 256
     session_ttl: float = 600.0
     max_pending_frames: int = 8
+    frame_threads: int = 0
+    small_scene: int = 4096
     api_keys: frozenset[str] | None = field(default=None)
 
     @classmethod
@@ -32,7 +37,8 @@ class Settings:
         kw: dict[str, object] = {}
         for name, conv in (("max_body_bytes", int), ("max_lights", int), ("max_objects", int),
                            ("max_sessions", int), ("session_ttl", float),
-                           ("max_pending_frames", int)):
+                           ("max_pending_frames", int), ("frame_threads", int),
+                           ("small_scene", int)):
             raw = env.get("LIGHTSCHED_" + name.upper())
             if raw:
                 kw[name] = conv(raw)
