@@ -678,8 +678,7 @@ class SceneAPI:
         CHANGE_OPS, in order and all or nothing: when one is rejected, its ValidationError
         is raised with the position of the change in ``position`` and the scene is as it
         was before the first (the service's frame request carries such a batch)."""
-        lights, objects = copy.copy(self.lights), copy.copy(self.objects)
-        objects.state = dict(self.objects.state)
+        saved = self.snapshot()
         for i, (op, given) in enumerate(changes):
             try:
                 if op not in CHANGE_OPS:
@@ -689,12 +688,23 @@ class SceneAPI:
                     raise ValidationError("fields", None, "must be a mapping of field arrays")
                 getattr(self, op)(**given)
             except ValidationError as e:
-                self.lights, self.objects = lights, objects
+                self.restore(saved)
                 e.position = i
                 raise
             except Exception:
-                self.lights, self.objects = lights, objects
+                self.restore(saved)
                 raise
+
+    def snapshot(self) -> tuple[LightStore, ObjectStore]:
+        """The scene as it is now, for ``restore``: shallow copies, as cheap as a few
+        references, because no call changes a store's arrays in place."""
+        objects = copy.copy(self.objects)
+        objects.state = dict(self.objects.state)
+        return copy.copy(self.lights), objects
+
+    def restore(self, saved: tuple[LightStore, ObjectStore]) -> None:
+        """Puts back a ``snapshot`` (the scene, not the frame state of frames since)."""
+        self.lights, self.objects = saved
 
     def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False) -> Any:
         """Steps one frame (DESIGN section 2) and returns its Frame (section 3)."""

@@ -201,7 +201,7 @@ class Service:
 
     def _step(self, s: Session, req: Any, cams: list[ls.Camera], dt: float) -> dict[str, Any]:
         sched = s.scheduler
-        before = (sched.lights, sched.objects)
+        before = sched.snapshot()
         try:
             sched.apply([(c.op, c.fields) for c in req.changes])
         except ls.ValidationError as e:
@@ -210,7 +210,7 @@ class Service:
         for what, n, cap in (("lights", len(sched.lights), limits.max_lights),
                              ("objects", len(sched.objects), limits.max_objects)):
             if n > cap:
-                sched.lights, sched.objects = before
+                sched.restore(before)
                 raise Problem(413, "too-large", "Scene too large",
                               f"a session holds at most {cap} {what}; this frame would make "
                               f"{n}", field=what)

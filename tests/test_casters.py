@@ -17,10 +17,10 @@ import math
 
 import numpy as np
 import pytest
+from helpers import assert_frames_match, camera
 
 import lightsched as ls
 import lightsched.reference as ref
-from tests.helpers import assert_frames_match, camera
 
 SCHEDULERS = pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
 MARGIN = 1e-6

@@ -15,6 +15,7 @@ asyncio one httpx.AsyncClient.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import http.client
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,6 +23,7 @@ from urllib.parse import urlsplit
 
 import httpx
 import numpy as np
+from websockets.exceptions import ConnectionClosed
 
 from .wire import JSON, MSGPACK, dumps, loads, media_type
 
@@ -250,6 +252,14 @@ class _Connection:
         self._conn.close()
 
 
+def _closed(e: ConnectionClosed) -> RemoteError:
+    """A stream the service closed: 1009 (message too big) is the WebSocket's 413."""
+    code = e.rcvd.code if e.rcvd is not None else 1006
+    status = 413 if code == 1009 else 400
+    return RemoteError(status, {"title": "Stream closed", "status": status,
+                                "detail": f"the service closed the stream ({code}): {e}"})
+
+
 def _ws_url(base: str, sid: str) -> str:
     return base.replace("http://", "ws://").replace("https://", "wss://").rstrip("/") + \
         f"/v1/sessions/{sid}/stream"
@@ -312,6 +322,7 @@ class RemoteScheduler(_Changes):
         self.frame_index: int = info["frame_index"]
         self._last: Frame | None = None
         self._ws: Any = None
+        self._stack = contextlib.ExitStack()
         self.stream = stream
 
     def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
@@ -333,10 +344,16 @@ class RemoteScheduler(_Changes):
             headers = {"Authorization": f"Bearer {self.client.api_key}"} \
                 if self.client.api_key else None
             # No permessage-deflate: arrays barely compress and deflate costs milliseconds.
-            self._ws = connect(_ws_url(self.client.url, self.id), additional_headers=headers,
-                               max_size=None, compression=None)
-        self._ws.send(dumps(doc, MSGPACK))
-        answer = loads(self._ws.recv(), MSGPACK)
+            self._ws = self._stack.enter_context(
+                connect(_ws_url(self.client.url, self.id), additional_headers=headers,
+                        max_size=None, compression=None))
+        try:
+            self._ws.send(dumps(doc, MSGPACK))
+            answer = loads(self._ws.recv(), MSGPACK)
+        except ConnectionClosed as e:
+            self._stack.close()
+            self._ws = None
+            raise _closed(e) from None
         if "frame_index" not in answer:
             raise _error(int(answer.get("status", 400)), answer)
         return answer
@@ -347,7 +364,7 @@ class RemoteScheduler(_Changes):
     def close(self, delete: bool = True) -> None:
         """Closes the stream and (by default) deletes the session."""
         if self._ws is not None:
-            self._ws.close()
+            self._stack.close()
             self._ws = None
         if delete:
             self.client.call("DELETE", f"/v1/sessions/{self.id}")
@@ -431,8 +448,12 @@ class AsyncRemoteScheduler(_Changes):
             self._ws = await connect(_ws_url(self.client.url, self.id),
                                      additional_headers=headers, max_size=None,
                                      compression=None)
-        await self._ws.send(dumps(doc, MSGPACK))
-        answer = loads(await self._ws.recv(), MSGPACK)
+        try:
+            await self._ws.send(dumps(doc, MSGPACK))
+            answer = loads(await self._ws.recv(), MSGPACK)
+        except ConnectionClosed as e:
+            self._ws = None
+            raise _closed(e) from None
         if "frame_index" not in answer:
             raise _error(int(answer.get("status", 400)), answer)
         return answer

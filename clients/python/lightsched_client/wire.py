@@ -43,7 +43,8 @@ def encode_array(a: np.ndarray, binary: bool) -> dict[str, Any]:
     if a.dtype.name not in DTYPES:
         raise TypeError(f"cannot send dtype {a.dtype}")
     # A memoryview: msgpack packs it as bin without another copy.
-    data = memoryview(np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))).cast("B")
+    c = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
+    data = memoryview(c.reshape(-1).view(np.uint8)) if c.size else b""
     return {"dtype": a.dtype.name, "shape": list(a.shape),
             "data": data if binary else base64.b64encode(data).decode("ascii")}
 
