@@ -304,3 +304,36 @@ def uvicorn_options(settings: Settings) -> dict[str, Any]:
     frame costs more than sending it)."""
     return {"http": "httptools", "loop": "uvloop", "ws_max_size": settings.max_body_bytes,
             "ws_per_message_deflate": False}
+
+
+class ServerThread:
+    """The service on a free port of 127.0.0.1 in a background thread of this process, with
+    serve()'s options (tests, the golden example generator, benchmarks)."""
+
+    def __init__(self, settings: Settings | None = None, demo: bool = False) -> None:
+        import socket
+        import threading
+
+        import uvicorn
+
+        self.settings = settings or Settings()
+        self.app = create_app(self.settings, demo=demo)
+        self.service = self.app.state.service
+        with socket.socket() as sock:
+            sock.bind(("127.0.0.1", 0))
+            self.port = sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}"
+        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning",
+                                **uvicorn_options(self.settings))
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+        self.thread.start()
+        deadline = time.monotonic() + 30
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise RuntimeError("the server thread did not start")
+            time.sleep(0.01)
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(timeout=10)

@@ -1,0 +1,167 @@
+"""schemas/: the JSON Schema of every request and response (from models.py) and the golden
+examples, request/response pairs in both encodings that the server's and every client's
+tests replay byte for byte.
+
+    python -m lightsched_server.schemas          # rewrite schemas/*.schema.json and examples/
+    python -m lightsched_server.schemas --check  # exit 1 if the committed files drifted
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lightsched_client.client import _Changes, camera_doc, config_doc, fields_doc
+from lightsched_client.wire import JSON, MSGPACK, dumps, loads
+
+import lightsched as ls
+
+from .models import SCHEMAS
+
+ROOT = Path(__file__).resolve().parent.parent / "schemas"
+ENCODINGS = {"msgpack": MSGPACK, "json": JSON}
+
+
+def schema_files() -> dict[str, bytes]:
+    out = {}
+    for name, model in SCHEMAS.items():
+        schema = model.model_json_schema()
+        schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+        schema["$id"] = f"urn:lightsched:schema:v1:{name}"
+        out[f"{name}.schema.json"] = (json.dumps(schema, indent=2, sort_keys=True) + "\n").encode()
+    return out
+
+
+# The golden scene: a point light, a shadowed spot, a shadowed sun; four boxes; one camera.
+LIGHTS = {
+    "id": np.array([3, 7, 9], np.int32),
+    "type": np.array([0, 1, 2], np.uint8),
+    "position": np.array([[0.0, 4.0, 2.0], [3.0, 6.0, 0.0], [0.0, 0.0, 0.0]]),
+    "radius": np.array([10.0, 12.0, 1.0]),
+    "direction": np.array([[0.0, -1.0, 0.0], [0.0, -1.0, 0.0], [0.5, -1.0, 0.25]]),
+    "outer_angle": np.array([0.8, 0.6, 0.8]),
+    "intensity": np.array([5.0, 8.0, 1.0]),
+    "shadows": np.array([False, True, True]),
+}
+OBJECTS = {
+    "id": np.array([10, 11, 12, 13], np.int32),
+    "bounds_min": np.array([[-1.0, 0.0, -1.0], [2.0, 0.0, 1.0], [-4.0, 0.0, 3.0],
+                            [-20.0, -0.5, -20.0]]),
+    "bounds_max": np.array([[1.0, 2.0, 1.0], [3.0, 5.0, 2.0], [-3.0, 1.0, 4.0],
+                            [20.0, 0.0, 20.0]]),
+}
+CAMERA = ls.Camera(position=np.array([0.0, 5.0, -15.0]), forward=np.array([0.0, -0.3, 1.0]),
+                   up=np.array([0.0, 1.0, 0.0]), fov_y=1.0, aspect=16 / 9, near=0.1, far=100.0,
+                   height_px=720.0)
+CONFIG = ls.Config(max_lights=2, shadow_budget=2, cascades=2)
+
+
+def example_requests() -> list[dict[str, Any]]:
+    """The golden exchanges, in the order a client makes them: method, path ({id} is the
+    session made by the "session" exchange), request map, expected status."""
+    first, later = _Changes(), _Changes()
+    first.set_lights(**LIGHTS)
+    first.set_objects(**OBJECTS)
+    later.update_lights(id=[3], position=[[1.0, 4.0, 2.0]])
+    bad = {k: v.copy() for k, v in LIGHTS.items()}
+    bad["radius"][1] = -1.0
+    return [
+        {"name": "schedule", "method": "POST", "path": "/v1/schedule", "status": 200,
+         "request": {"lights": fields_doc(LIGHTS), "objects": fields_doc(OBJECTS),
+                     "cameras": [camera_doc(CAMERA)], "config": config_doc(CONFIG),
+                     "stats": False}},
+        {"name": "schedule-invalid", "method": "POST", "path": "/v1/schedule", "status": 422,
+         "request": {"lights": fields_doc(bad), "objects": fields_doc(OBJECTS),
+                     "cameras": [camera_doc(CAMERA)], "stats": False}},
+        {"name": "session", "method": "POST", "path": "/v1/sessions", "status": 201,
+         "request": {"config": config_doc(CONFIG)}},
+        {"name": "frame-0", "method": "POST", "path": "/v1/sessions/{id}/frames", "status": 200,
+         "request": {**first._request([CAMERA], 1 / 60, False, None, False), "stats": False}},
+        {"name": "frame-1-changed", "method": "POST", "path": "/v1/sessions/{id}/frames",
+         "status": 200,
+         "request": {**later._request([CAMERA], 0.1, False, None, True), "stats": False}},
+    ]
+
+
+def replay(send: Any, encoding: str) -> list[tuple[dict[str, Any], bytes, int, bytes]]:
+    """Runs the exchanges through ``send(method, path, body, content_type) -> (status,
+    body)``; returns (exchange, request bytes, status, response bytes). The session
+    exchange's answer (a random id) is not kept as golden."""
+    out, sid = [], None
+    for ex in example_requests():
+        body = dumps(ex["request"], encoding)
+        status, answer = send(ex["method"], ex["path"].replace("{id}", sid or ""), body, encoding)
+        if ex["name"] == "session":
+            sid = loads(answer, encoding)["id"]
+            answer = b""
+        out.append((ex, body, status, answer))
+    return out
+
+
+def example_files(send: Any) -> dict[str, bytes]:
+    files: dict[str, bytes] = {}
+    index = []
+    for ext, encoding in ENCODINGS.items():
+        for ex, body, status, answer in replay(send, encoding):
+            files[f"examples/{ex['name']}.request.{ext}"] = body
+            if answer:
+                files[f"examples/{ex['name']}.response.{ext}"] = answer
+            if ext == "msgpack":
+                index.append({"name": ex["name"], "method": ex["method"], "path": ex["path"],
+                              "status": status, "response": bool(answer)})
+    files["examples/index.json"] = (json.dumps(index, indent=2) + "\n").encode()
+    return files
+
+
+def http_send(url: str) -> Any:
+    """send() over one kept-alive HTTP connection to a running service."""
+    import http.client
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(url)
+    conn = http.client.HTTPConnection(parts.hostname, parts.port, timeout=60)
+
+    def send(method: str, path: str, body: bytes, encoding: str) -> tuple[int, bytes]:
+        conn.request(method, path, body=body, headers={"Content-Type": encoding,
+                                                       "Accept": encoding})
+        r = conn.getresponse()
+        return r.status, r.read()
+
+    return send
+
+
+def all_files() -> dict[str, bytes]:
+    """Every file of schemas/, the examples answered by a service started for the purpose."""
+    from .app import ServerThread
+
+    server = ServerThread()
+    try:
+        return {**schema_files(), **example_files(http_send(server.url))}
+    finally:
+        server.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--check", action="store_true", help="fail if schemas/ differs")
+    args = p.parse_args(argv)
+    files = all_files()
+    drift = [name for name, data in files.items()
+             if not (ROOT / name).exists() or (ROOT / name).read_bytes() != data]
+    if args.check:
+        for name in drift:
+            print(f"schemas/{name} differs from what the code generates", file=sys.stderr)
+        return 1 if drift else 0
+    for name in drift:
+        (ROOT / name).parent.mkdir(parents=True, exist_ok=True)
+        (ROOT / name).write_bytes(files[name])
+        print(f"wrote schemas/{name}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

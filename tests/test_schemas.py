@@ -1,0 +1,94 @@
+"""schemas/: the committed JSON Schemas and golden examples are what the code produces, a
+live server answers the golden requests with the golden bytes (HTTP and WebSocket), and the
+Python client builds the golden requests and reads the golden answers as the embedded
+scheduler's frames."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from lightsched_client.client import frame_of
+from lightsched_client.wire import JSON, MSGPACK, dumps, loads
+from lightsched_server import schemas
+from live import LiveServer
+from websockets.sync.client import connect
+
+import lightsched as ls
+from lightsched.frame import FRAME_ARRAYS
+
+ROOT = schemas.ROOT
+INDEX = json.loads((ROOT / "examples" / "index.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def server():
+    s = LiveServer()
+    yield s
+    s.stop()
+
+
+def test_committed_files_match_the_code():
+    """The schemas are generated from the pydantic models and the examples from the
+    client's encoder and a live server; regenerate with python -m lightsched_server.schemas."""
+    files = schemas.all_files()
+    for name, data in files.items():
+        path = ROOT / name
+        assert path.exists(), f"schemas/{name} is missing"
+        assert path.read_bytes() == data, f"schemas/{name} drifted from the code"
+    stale = {p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if p.is_file()} \
+        - set(files) - {"wire.md"}
+    assert not stale, f"files no generator writes: {sorted(stale)}"
+
+
+@pytest.mark.parametrize("ext,encoding", [("msgpack", MSGPACK), ("json", JSON)])
+def test_live_server_answers_golden_requests_byte_for_byte(server, ext, encoding):
+    send = schemas.http_send(server.url)
+    sid = ""
+    for ex in INDEX:
+        body = (ROOT / "examples" / f"{ex['name']}.request.{ext}").read_bytes()
+        status, answer = send(ex["method"], ex["path"].replace("{id}", sid), body, encoding)
+        assert status == ex["status"], (ex["name"], answer[:200])
+        if ex["name"] == "session":
+            sid = loads(answer, encoding)["id"]
+            continue
+        assert answer == (ROOT / "examples" / f"{ex['name']}.response.{ext}").read_bytes(), ex["name"]
+
+
+def test_websocket_answers_golden_frames_byte_for_byte(server):
+    send = schemas.http_send(server.url)
+    session = (ROOT / "examples" / "session.request.msgpack").read_bytes()
+    sid = loads(send("POST", "/v1/sessions", session, MSGPACK)[1], MSGPACK)["id"]
+    url = server.url.replace("http://", "ws://") + f"/v1/sessions/{sid}/stream"
+    with connect(url, compression=None) as ws:
+        for name in ("frame-0", "frame-1-changed"):
+            ws.send((ROOT / "examples" / f"{name}.request.msgpack").read_bytes())
+            assert ws.recv() == (ROOT / "examples" / f"{name}.response.msgpack").read_bytes(), name
+
+
+@pytest.mark.parametrize("ext,encoding", [("msgpack", MSGPACK), ("json", JSON)])
+def test_client_reads_golden_answers_as_embedded_frames(ext, encoding):
+    def answer(name):
+        return loads((ROOT / "examples" / f"{name}.response.{ext}").read_bytes(), encoding)
+
+    want = ls.schedule(schemas.LIGHTS, schemas.OBJECTS, [schemas.CAMERA], schemas.CONFIG)
+    got = frame_of(answer("schedule"))
+    embedded = ls.Scheduler(schemas.CONFIG)
+    embedded.set_lights(**schemas.LIGHTS)
+    embedded.set_objects(**schemas.OBJECTS)
+    frames = [(got, want), (frame_of(answer("frame-0")), embedded.frame([schemas.CAMERA]))]
+    embedded.update_lights(id=[3], position=[[1.0, 4.0, 2.0]])
+    frames.append((frame_of(answer("frame-1-changed"), frames[-1][0]),
+                   embedded.frame([schemas.CAMERA], dt=0.1)))
+    for k, (g, w) in enumerate(frames):
+        for name in FRAME_ARRAYS:
+            if k == 2 and name == "priority":
+                continue  # changed_only sends priority with changed rows only
+            assert np.array_equal(getattr(g, name), getattr(w, name)), (k, name)
+    problem = answer("schedule-invalid")
+    assert (problem["status"], problem["field"], problem["index"]) == (422, "radius", 1)
+    # The client's encoder still writes the golden request bytes.
+    for ex in schemas.example_requests():
+        assert dumps(ex["request"], encoding) == \
+            (ROOT / "examples" / f"{ex['name']}.request.{ext}").read_bytes(), ex["name"]
