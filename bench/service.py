@@ -33,6 +33,7 @@ import argparse
 import contextlib
 import http.client
 import importlib.util
+import os
 import shlex
 import socket
 import subprocess
@@ -82,6 +83,7 @@ TRANSPORTS = ("HTTP", "WebSocket")
 MODES = ("full", "changed_only")
 # The issue's targets: session frame over HTTP, round trip on this machine.
 TARGETS = ((1000, "p50", 2.0), (1000, "p99", 5.0), (10_000, "p50", 10.0))
+SLOW = 3.0  # a frame over 3x its run's p50 counts as slow
 SPLITS = ("encode", "decode", "s_decode", "s_frame", "compute", "s_encode", "transport")
 
 
@@ -237,6 +239,12 @@ def summarise(runs: list[dict[str, np.ndarray]]) -> dict[str, Any]:
     every = {k: np.concatenate([r[k] for r in runs]) for k in runs[0]}
     out: dict[str, Any] = {"p50": float(np.median(p50s)), "p99": max(p99s), "p50s": p50s,
                            "p99s": p99s, "frames": int(every["total"].size)}
+    # Frames over SLOW x their run's p50, and where their time went (compute or the rest).
+    slow = np.concatenate([r["total"] > SLOW * p for r, p in zip(runs, p50s, strict=True)])
+    out["slow"] = int(slow.sum())
+    out["slow_compute"] = float(np.median(every["compute"][slow])) if slow.any() else 0.0
+    out["slow_rest"] = float(np.median((every["total"] - every["compute"])[slow])) \
+        if slow.any() else 0.0
     for k in (*SPLITS, "req", "resp"):
         v = every[k]
         out[k] = float(np.median(v)) if np.isfinite(v).all() else None
@@ -256,8 +264,9 @@ def bench_size(server: Server, n: int, l: int, args: argparse.Namespace) -> list
                 got[(t, m)].append(run_case(client, server.port, scene, t, m, frames,
                                             args.warmup))
             say(f"   run {run + 1}: " + ", ".join(
-                f"{t}/{m} p50 {np.percentile(got[(t, m)][-1]['total'], 50):.2f}" for t, m in cases)
-                + " ms")
+                f"{t}/{m} {np.percentile(got[(t, m)][-1]['total'], 50):.2f}/"
+                f"{np.percentile(got[(t, m)][-1]['total'], 99):.2f}" for t, m in cases)
+                + " ms (p50/p99)")
     rows = []
     for t, m in cases:
         r = summarise(got[(t, m)])
@@ -272,13 +281,15 @@ def fmt_ms(v: float | None) -> str:
 
 HEAD = ["N", "L", "transport", "mode", "p50 ms", "p99 ms", "run p50s ms", "client encode",
         "client decode", "server decode", "server frame", "compute", "server encode",
-        "transport ms", "request B", "response B"]
+        "transport ms", "request B", "response B", f"frames > {SLOW:g}x p50"]
 
 
 def cells(r: dict[str, Any]) -> list[str]:
     return [fmt_count(r["n"]), fmt_count(r["l"]), r["via"], r["mode"], f"{r['p50']:.2f}",
             f"{r['p99']:.2f}", "/".join(f"{x:.2f}" for x in r["p50s"]),
-            *[fmt_ms(r[k]) for k in SPLITS], f"{r['req']:.0f}", f"{r['resp']:.0f}"]
+            *[fmt_ms(r[k]) for k in SPLITS], f"{r['req']:.0f}", f"{r['resp']:.0f}",
+            f"{r['slow']}/{r['frames']}" + (f": compute {r['slow_compute']:.0f} ms, rest "
+                                            f"{r['slow_rest']:.0f} ms" if r["slow"] else "")]
 
 
 def verdicts(rows: list[dict[str, Any]]) -> list[str]:
@@ -308,7 +319,8 @@ def print_table(rows: list[dict[str, Any]]) -> None:
         say(v)
 
 
-def render(rows: list[dict[str, Any]], args: argparse.Namespace) -> str:
+def render(rows: list[dict[str, Any]], args: argparse.Namespace, load: tuple[float, float]
+           ) -> str:
     m = machine()
     cmd = "python bench/service.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
     frames = ", ".join(f"{max(1, round(default_frames(n) * args.frames))} at {fmt_count(n)}"
@@ -319,7 +331,8 @@ def render(rows: list[dict[str, Any]], args: argparse.Namespace) -> str:
            f"Machine: {m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads), "
            f"{m['os']}; Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}. Client "
            "and server (`python -m lightsched serve`, uvicorn, one worker) on the same "
-           "machine over 127.0.0.1, sharing its CPUs.", "",
+           f"machine over 127.0.0.1, sharing its CPUs; 1-minute load average {load[0]:.2f} "
+           f"before the run, {load[1]:.2f} after (other processes on the machine count).", "",
            f"Scenes: `lightsched.scenes.city(N, L, seed={args.seed})`, one camera, default "
            "Config; every light moves every frame (`update_lights` with all positions, sent "
            "with the frame). Msgpack both ways; HTTP on one kept-alive connection "
@@ -337,7 +350,9 @@ def render(rows: list[dict[str, Any]], args: argparse.Namespace) -> str:
            "transport = round trip - client encode - client decode - server decode, frame "
            "and encode (HTTP), or - compute (WebSocket, which has no Server-Timing: its "
            "transport also holds the server's decode, checks and encode). Medians do not "
-           "add up to the p50.", "",
+           "add up to the p50. The last column counts the frames slower than "
+           f"{SLOW:g}x their run's p50, with the median compute and rest (round trip - compute) "
+           "of those frames.", "",
            "| " + " | ".join(HEAD) + " |", "|" + "---|" * len(HEAD)]
     out += ["| " + " | ".join(cells(r)) + " |" for r in rows]
     out += ["", "Issue targets (session frame over HTTP, round trip): 1k objects p50 <= 2 ms "
@@ -378,16 +393,19 @@ def main(argv: list[str] | None = None) -> int:
     m = machine()
     say(f"lightsched {lightsched.__version__} at {git_commit()}; {m['cpu']}, {m['nproc']} CPUs")
     t0 = time.perf_counter()
+    load0 = os.getloadavg()[0]
     server = Server()
     try:
         say(f"server up on {server.url} in {time.perf_counter() - t0:.1f} s")
         rows = [r for n, l in args.sizes for r in bench_size(server, n, l, args)]
     finally:
         server.stop()
+    load = (load0, os.getloadavg()[0])
     print_table(rows)
-    say(f"\n{time.perf_counter() - t0:.0f} s in all")
+    say(f"\n{time.perf_counter() - t0:.0f} s in all; 1-minute load average {load[0]:.2f} before, "
+        f"{load[1]:.2f} after")
     if args.write:
-        write_results(render(rows, args))
+        write_results(render(rows, args, load))
     return 0
 
 

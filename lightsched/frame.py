@@ -1,7 +1,9 @@
 """Frame: the per-frame outputs of DESIGN section 3, plus the plan and stats of section 6.
 
 Takes the arrays the stages produced and holds them under DESIGN's names; ``empty_frame``
-builds the all-empty frame of a given size so every producer agrees on dtypes and shapes.
+builds the all-empty frame of a given size so every producer agrees on dtypes and shapes;
+``changed_rows`` tells which objects' rows differ between two frames (the service sends
+only those when asked).
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba as nb
 import numpy as np
 
 # name -> (dtype, shape suffix kind): "N" per object, "NK" per object slot, others 1-D.
@@ -94,3 +97,49 @@ def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> F
               for name in FRAME_ARRAYS if name != "object_id"}
     ids = given["object_id"] if "object_id" in given else object_id.astype(np.int32, copy=True)
     return Frame(object_id=ids, **fields)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _rows_differ(cur, prev, prev_row, changed):
+    """changed[i] |= row i of cur [N, W] differs from row prev_row[i] of prev (or
+    prev_row[i] < 0: no such row)."""
+    for i in range(cur.shape[0]):
+        if changed[i]:
+            continue
+        j = prev_row[i]
+        if j < 0:
+            changed[i] = True
+            continue
+        for w in range(cur.shape[1]):
+            if cur[i, w] != prev[j, w]:
+                changed[i] = True
+                break
+
+
+def changed_rows(prev: Frame, cur: Frame, names: tuple[str, ...]) -> np.ndarray:
+    """Per row of ``cur``: True if its object id is new since ``prev`` or any of the named
+    per-object arrays differs from prev's row of the same id (rows ascend by id in both)."""
+    n = cur.object_id.size
+    if np.array_equal(prev.object_id, cur.object_id):
+        prev_row = np.arange(n)
+    else:
+        pos = np.searchsorted(prev.object_id, cur.object_id)
+        pos_c = np.minimum(pos, max(prev.object_id.size - 1, 0))
+        kept = (pos < prev.object_id.size) & (prev.object_id[pos_c] == cur.object_id) \
+            if prev.object_id.size else np.zeros(n, np.bool_)
+        prev_row = np.where(kept, pos_c, -1)
+    changed = np.zeros(n, np.bool_)
+    for name in names:
+        a, b = _row_words(getattr(cur, name)), _row_words(getattr(prev, name))
+        _rows_differ(a, b, prev_row, changed)
+    return changed
+
+
+def _row_words(a: np.ndarray) -> np.ndarray:
+    """Rows as the widest words that tile them (bitwise: a row "differs" when its bytes
+    do), so a row of 8 int32 is compared as 4 int64."""
+    rows = np.ascontiguousarray(a).reshape(a.shape[0], -1).view(np.uint8)
+    for word in (np.uint64, np.uint32, np.uint16):
+        if rows.shape[1] % np.dtype(word).itemsize == 0:
+            return rows.view(word)
+    return rows

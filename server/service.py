@@ -23,7 +23,7 @@ from pydantic import BaseModel
 from pydantic import ValidationError as PydanticError
 
 import lightsched as ls
-from lightsched.frame import FRAME_ARRAYS
+from lightsched.frame import FRAME_ARRAYS, changed_rows
 from lightsched.scene import validate_cameras, validate_dt
 
 from .metrics import Metrics
@@ -85,24 +85,7 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
             doc["stats"] = f.stats
         return doc
     same_set = np.array_equal(prev.object_id, f.object_id)
-    if same_set:
-        changed = np.zeros(f.object_id.size, bool)
-        for key in CHANGE_KEYS:
-            a, b = getattr(f, key), getattr(prev, key)
-            diff = a != b
-            changed |= diff.reshape(diff.shape[0], -1).any(axis=1) if diff.ndim > 1 else diff
-    else:
-        # Rows of ids kept from the previous frame are compared; new ids always change.
-        pos = np.searchsorted(prev.object_id, f.object_id)
-        pos_c = np.minimum(pos, max(prev.object_id.size - 1, 0))
-        kept = (pos < prev.object_id.size) & (prev.object_id[pos_c] == f.object_id) \
-            if prev.object_id.size else np.zeros(f.object_id.size, bool)
-        changed = ~kept
-        for key in CHANGE_KEYS:
-            a, b = getattr(f, key)[kept], getattr(prev, key)[pos_c[kept]]
-            diff = a != b
-            changed[kept] |= diff.reshape(diff.shape[0], -1).any(axis=1) if diff.ndim > 1 \
-                else diff
+    changed = changed_rows(prev, f, CHANGE_KEYS)
     rows = np.flatnonzero(changed)
     doc["rows"] = f.object_id[rows]
     for name in names:

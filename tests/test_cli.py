@@ -24,3 +24,58 @@ def test_demo_rejects_zero_frames():
     proc = subprocess.run([sys.executable, "-m", "lightsched", "demo", "--frames", "0"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and "--frames" in proc.stderr
+
+
+def test_serve_help_explains_the_options():
+    proc = subprocess.run([sys.executable, "-m", "lightsched", "serve", "--help"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0
+    for word in ("--host", "--port", "--no-demo", "LIGHTSCHED_API_KEYS", "LIGHTSCHED_MAX_BODY_BYTES"):
+        assert word in proc.stdout, proc.stdout
+
+
+def test_serve_then_a_client_drives_the_demo_session():
+    """`make run`'s command in a process of its own; the Python client drives the preloaded
+    demo session and a new one from this process, as a second shell would."""
+    import socket
+    import time
+
+    from lightsched_client import Client
+
+    from lightsched.scenes import demo_scene
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "lightsched", "serve", "--port", str(port),
+                             "--log-level", "warning"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        banner = proc.stdout.readline()
+        assert f"http://127.0.0.1:{port}/docs" in banner and "demo" in banner, banner
+        with Client(f"http://127.0.0.1:{port}") as c:
+            deadline = time.monotonic() + 60
+            while True:
+                try:
+                    c.health()
+                    break
+                except OSError:
+                    assert time.monotonic() < deadline and proc.poll() is None
+                    time.sleep(0.1)
+            scene = demo_scene(seed=0)
+            info = c.call("GET", "/v1/sessions/demo")
+            assert info["objects"] == len(scene.objects["id"])
+            demo = c.call("POST", "/v1/sessions/demo/frames",
+                          {"cameras": [{"position": list(map(float, cam.position)),
+                                        "forward": list(map(float, cam.forward)),
+                                        "up": list(map(float, cam.up)), "fov_y": cam.fov_y,
+                                        "aspect": cam.aspect, "near": cam.near, "far": cam.far}
+                                       for cam in scene.cameras], "outputs": ["count"]})
+            assert demo["count"].sum() > 0
+            s = c.session()
+            s.set_lights(**scene.lights)
+            s.set_objects(**scene.objects)
+            assert s.frame(scene.cameras).light_ids.shape == (len(scene.objects["id"]), 8)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

@@ -131,11 +131,13 @@ def fields_doc(fields: dict[str, Any]) -> dict[str, Any]:
 def merge_changed(prev: Frame | None, doc: dict[str, Any]) -> Frame:
     """The full frame from a changed_only answer and the previous full frame: per-object
     arrays keep the previous values of ids that did not change (aligned by id)."""
-    ids = doc.get("object_id")
-    if ids is None:
-        ids = prev.object_id if prev is not None else np.zeros(0, np.int32)
-    rows = doc["rows"]
+    same_set = "object_id" not in doc and prev is not None and prev.object_id is not None
+    ids = prev.object_id if same_set else doc.get("object_id", np.zeros(0, np.int32))
     f = Frame(stats=doc.get("stats") or {}, frame_index=doc["frame_index"], object_id=ids)
+    at = np.searchsorted(ids, doc["rows"])  # where the rows sent go (ids ascend)
+    if not same_set and prev is not None and prev.object_id is not None and prev.object_id.size:
+        pos = np.minimum(np.searchsorted(prev.object_id, ids), prev.object_id.size - 1)
+        kept = prev.object_id[pos] == ids
     for name in FRAME_FIELDS:
         if name == "object_id" or name not in doc:
             continue
@@ -143,13 +145,14 @@ def merge_changed(prev: Frame | None, doc: dict[str, Any]) -> Frame:
         if name not in PER_OBJECT:
             setattr(f, name, part)
             continue
-        full = np.full((ids.size,) + part.shape[1:], PER_OBJECT[name], dtype=part.dtype)
         old = getattr(prev, name, None) if prev is not None else None
-        if old is not None and prev is not None and prev.object_id.size:
-            pos = np.minimum(np.searchsorted(prev.object_id, ids), prev.object_id.size - 1)
-            kept = prev.object_id[pos] == ids
-            full[kept] = old[pos[kept]]
-        full[np.searchsorted(ids, rows)] = part
+        if same_set and old is not None:
+            full = old.copy()
+        else:
+            full = np.full((ids.size,) + part.shape[1:], PER_OBJECT[name], dtype=part.dtype)
+            if old is not None and prev.object_id.size:
+                full[kept] = old[pos[kept]]
+        full[at] = part
         setattr(f, name, full)
     return f
 
@@ -242,11 +245,17 @@ class _Connection:
                 r = self._conn.getresponse()
                 return _answer(r.status, r.getheader("content-type"), r.read())
             except (http.client.RemoteDisconnected, BrokenPipeError, ConnectionResetError):
-                self._conn.close()
-                self._conn = self._new()
+                self._reset()
                 if attempt:
                     raise
+            except (OSError, http.client.HTTPException):
+                self._reset()  # e.g. refused: the next call starts on a fresh connection
+                raise
         raise AssertionError("unreachable")
+
+    def _reset(self) -> None:
+        self._conn.close()
+        self._conn = self._new()
 
     def close(self) -> None:
         self._conn.close()
