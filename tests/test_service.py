@@ -448,3 +448,50 @@ def test_health_metrics_and_docs(server):
     assert status == 200 and "swagger" in html.lower()
     spec = raw(server, "GET", "/openapi.json")[2]
     assert "/v1/sessions/{sid}/frames" in spec["paths"] and "FrameRequest" in spec["components"]["schemas"]
+
+
+def test_settings_from_environment_and_key_file(tmp_path, monkeypatch):
+    keys = tmp_path / "keys"
+    keys.write_text("# service keys\nalpha\n\nbeta  # the second\n")
+    monkeypatch.setenv("LIGHTSCHED_API_KEYS", "gamma, delta")
+    monkeypatch.setenv("LIGHTSCHED_API_KEYS_FILE", str(keys))
+    monkeypatch.setenv("LIGHTSCHED_MAX_SESSIONS", "3")
+    monkeypatch.setenv("LIGHTSCHED_SESSION_TTL", "2.5")
+    s = Settings.from_env()
+    assert s.api_keys == frozenset({"alpha", "beta", "gamma", "delta"})
+    assert (s.max_sessions, s.session_ttl, s.max_body_bytes) == (3, 2.5, Settings().max_body_bytes)
+
+
+def test_sessions_run_side_by_side_on_worker_threads():
+    """Frames of different sessions overlap on the thread pool (small_scene=0 sends every
+    frame there) and each still equals its embedded twin."""
+    srv = LiveServer(Settings(small_scene=0))
+    scenes = [city(800, 80, seed=s) for s in (11, 12, 13)]
+
+    async def run():
+        async with AsyncClient(srv.url) as c:
+            sessions = []
+            for sc in scenes:
+                s = await c.session(CONFIG)
+                s.set_lights(**sc.lights)
+                s.set_objects(**sc.objects)
+                sessions.append(s)
+            out = []
+            for i in range(3):
+                for s, sc in zip(sessions, scenes, strict=True):
+                    s.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, i))
+                out.append(await asyncio.gather(*[s.frame(sc.cameras, dt=0.05)
+                                                  for s, sc in zip(sessions, scenes, strict=True)]))
+            return out
+
+    try:
+        got = asyncio.run(run())
+    finally:
+        srv.stop()
+    for k, sc in enumerate(scenes):
+        twin = ls.Scheduler(CONFIG)
+        twin.set_lights(**sc.lights)
+        twin.set_objects(**sc.objects)
+        for i in range(3):
+            twin.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, i))
+            assert_same_frame(got[i][k], twin.frame(sc.cameras, dt=0.05), f"session {k} frame {i}")
