@@ -330,12 +330,14 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
     return "\n".join(out) + "\n"
 
 
-def write_results(section: str) -> None:
+def write_results(section: str, begin: str = BEGIN, end: str = END) -> None:
+    """Puts ``section`` (which starts with ``begin`` and ends with ``end``) into RESULTS.md
+    in place of the previous one; the rest of the file is kept."""
     if RESULTS.exists():
         text = RESULTS.read_text()
-        if BEGIN in text and END in text:
-            a = text.index(BEGIN)
-            b = text.index(END) + len(END)
+        if begin in text and end in text:
+            a = text.index(begin)
+            b = text.index(end) + len(end)
             text = text[:a] + section.rstrip("\n") + text[b:]
         else:
             text = text.rstrip("\n") + "\n\n" + section

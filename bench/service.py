@@ -50,7 +50,6 @@ import lightsched
 from lightsched.scenes import DT, city, move_lights
 
 HERE = Path(__file__).resolve().parent
-RESULTS = HERE / "RESULTS.md"
 BEGIN = "<!-- bench/service.py: begin (generated, do not edit by hand) -->"
 END = "<!-- bench/service.py: end -->"
 
@@ -362,18 +361,6 @@ def render(rows: list[dict[str, Any]], args: argparse.Namespace, load: tuple[flo
     return "\n".join(out) + "\n"
 
 
-def write_results(section: str) -> None:
-    text = RESULTS.read_text() if RESULTS.exists() else "# Benchmark results\n"
-    if BEGIN in text and END in text:
-        a = text.index(BEGIN)
-        b = text.index(END) + len(END)
-        text = text[:a] + section.rstrip("\n") + text[b:]
-    else:
-        text = text.rstrip("\n") + "\n\n" + section
-    RESULTS.write_text(text)
-    say(f"\nwrote {RESULTS}")
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", type=parse_sizes, default=parse_sizes("1k:100,10k:1k"),
@@ -405,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
     say(f"\n{time.perf_counter() - t0:.0f} s in all; 1-minute load average {load[0]:.2f} before, "
         f"{load[1]:.2f} after")
     if args.write:
-        write_results(render(rows, args, load))
+        _core.write_results(render(rows, args, load), BEGIN, END)
     return 0
 
 

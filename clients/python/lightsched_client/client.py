@@ -167,6 +167,25 @@ def frame_of(doc: dict[str, Any], prev: Frame | None = None) -> Frame:
     return f
 
 
+def camera_docs(cameras: Any) -> list[dict[str, Any]]:
+    """One camera or a list of them, as wire maps."""
+    if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
+        cameras = [cameras]
+    return [camera_doc(c) for c in cameras]
+
+
+def schedule_doc(lights: dict[str, Any], objects: dict[str, Any], cameras: Any, config: Any,
+                 outputs: list[str] | None) -> dict[str, Any]:
+    """The body of POST /v1/schedule."""
+    doc: dict[str, Any] = {"lights": fields_doc(lights), "objects": fields_doc(objects),
+                           "cameras": camera_docs(cameras)}
+    if config is not None:
+        doc["config"] = config_doc(config)
+    if outputs is not None:
+        doc["outputs"] = list(outputs)
+    return doc
+
+
 class _Changes:
     """The embedded API's scene calls, kept until the next frame."""
 
@@ -193,11 +212,8 @@ class _Changes:
 
     def _request(self, cameras: Any, dt: float, cut: bool, outputs: list[str] | None,
                  changed_only: bool) -> dict[str, Any]:
-        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
-            cameras = [cameras]
         doc: dict[str, Any] = {"dt": float(dt), "cut": bool(cut),
-                               "cameras": [camera_doc(c) for c in cameras],
-                               "changes": self._changes}
+                               "cameras": camera_docs(cameras), "changes": self._changes}
         self._changes = []  # sent: applied with the frame, or dropped with it
         if outputs is not None:
             doc["outputs"] = list(outputs)
@@ -291,15 +307,8 @@ class Client:
     def schedule(self, lights: dict[str, Any], objects: dict[str, Any], cameras: Any,
                  config: Any = None, outputs: list[str] | None = None) -> Frame:
         """The stateless one-frame call (lightsched.schedule)."""
-        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
-            cameras = [cameras]
-        doc: dict[str, Any] = {"lights": fields_doc(lights), "objects": fields_doc(objects),
-                               "cameras": [camera_doc(c) for c in cameras]}
-        if config is not None:
-            doc["config"] = config_doc(config)
-        if outputs is not None:
-            doc["outputs"] = list(outputs)
-        return frame_of(self.call("POST", "/v1/schedule", doc))
+        return frame_of(self.call("POST", "/v1/schedule",
+                                  schedule_doc(lights, objects, cameras, config, outputs)))
 
     def session(self, config: Any = None, stream: bool = False) -> RemoteScheduler:
         """A new session (a remote lightsched.Scheduler)."""
@@ -320,52 +329,69 @@ class Client:
         self.close()
 
 
-class RemoteScheduler(_Changes):
-    """A session: the methods of lightsched.Scheduler, computed by the service."""
+class _Session(_Changes):
+    """What a session's client keeps: its id and config, the last full frame (changed_only
+    answers are merged into it) and the stream, once opened."""
 
-    def __init__(self, client: Client, info: dict[str, Any], stream: bool = False) -> None:
+    def __init__(self, client: Any, info: dict[str, Any], stream: bool) -> None:
         super().__init__()
         self.client = client
         self.id: str = info["id"]
         self.config: dict[str, Any] = info["config"]
         self.frame_index: int = info["frame_index"]
+        self.stream = stream
         self._last: Frame | None = None
         self._ws: Any = None
-        self._stack = contextlib.ExitStack()
-        self.stream = stream
+        self._path = f"/v1/sessions/{self.id}/frames"
 
-    def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
-              outputs: list[str] | None = None, changed_only: bool = False) -> Frame:
-        doc = self._request(cameras, dt, cut, outputs, changed_only)
-        if self.stream:
-            answer = self._stream_call(doc)
-        else:
-            answer = self.client.call("POST", f"/v1/sessions/{self.id}/frames", doc)
+    def _received(self, answer: dict[str, Any]) -> Frame:
         f = frame_of(answer, self._last)
         self._last = f
         self.frame_index = f.frame_index + 1
         return f
 
+    def _ws_headers(self) -> dict[str, str] | None:
+        key = self.client.api_key
+        return {"Authorization": f"Bearer {key}"} if key else None
+
+
+def _stream_answer(raw: bytes) -> dict[str, Any]:
+    answer = loads(raw, MSGPACK)
+    if "frame_index" not in answer:
+        raise _error(int(answer.get("status", 400)), answer)
+    return answer
+
+
+class RemoteScheduler(_Session):
+    """A session: the methods of lightsched.Scheduler, computed by the service."""
+
+    def __init__(self, client: Client, info: dict[str, Any], stream: bool = False) -> None:
+        super().__init__(client, info, stream)
+        self._stack = contextlib.ExitStack()
+
+    def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
+              outputs: list[str] | None = None, changed_only: bool = False) -> Frame:
+        doc = self._request(cameras, dt, cut, outputs, changed_only)
+        if self.stream:
+            return self._received(self._stream_call(doc))
+        return self._received(self.client.call("POST", self._path, doc))
+
     def _stream_call(self, doc: dict[str, Any]) -> Any:
         from websockets.sync.client import connect
 
         if self._ws is None:
-            headers = {"Authorization": f"Bearer {self.client.api_key}"} \
-                if self.client.api_key else None
             # No permessage-deflate: arrays barely compress and deflate costs milliseconds.
             self._ws = self._stack.enter_context(
-                connect(_ws_url(self.client.url, self.id), additional_headers=headers,
+                connect(_ws_url(self.client.url, self.id), additional_headers=self._ws_headers(),
                         max_size=None, compression=None))
         try:
             self._ws.send(dumps(doc, MSGPACK))
-            answer = loads(self._ws.recv(), MSGPACK)
+            raw = self._ws.recv()
         except ConnectionClosed as e:
             self._stack.close()
             self._ws = None
             raise _closed(e) from None
-        if "frame_index" not in answer:
-            raise _error(int(answer.get("status", 400)), answer)
-        return answer
+        return _stream_answer(raw)
 
     def info(self) -> dict[str, Any]:
         return self.client.call("GET", f"/v1/sessions/{self.id}")
@@ -396,15 +422,9 @@ class AsyncClient:
 
     async def schedule(self, lights: dict[str, Any], objects: dict[str, Any], cameras: Any,
                        config: Any = None, outputs: list[str] | None = None) -> Frame:
-        if isinstance(cameras, dict) or not isinstance(cameras, (list, tuple)):
-            cameras = [cameras]
-        doc: dict[str, Any] = {"lights": fields_doc(lights), "objects": fields_doc(objects),
-                               "cameras": [camera_doc(c) for c in cameras]}
-        if config is not None:
-            doc["config"] = config_doc(config)
-        if outputs is not None:
-            doc["outputs"] = list(outputs)
-        return frame_of(await self.call("POST", "/v1/schedule", doc))
+        """The stateless one-frame call (lightsched.schedule)."""
+        return frame_of(await self.call("POST", "/v1/schedule",
+                                        schedule_doc(lights, objects, cameras, config, outputs)))
 
     async def session(self, config: Any = None, stream: bool = False) -> AsyncRemoteScheduler:
         info = await self.call("POST", "/v1/sessions", {"config": config_doc(config)}
@@ -421,51 +441,35 @@ class AsyncClient:
         await self.close()
 
 
-class AsyncRemoteScheduler(_Changes):
+class AsyncRemoteScheduler(_Session):
     """RemoteScheduler for asyncio: ``await s.frame(...)``."""
 
     def __init__(self, client: AsyncClient, info: dict[str, Any], stream: bool = False) -> None:
-        super().__init__()
-        self.client = client
-        self.id: str = info["id"]
-        self.config: dict[str, Any] = info["config"]
-        self.frame_index: int = info["frame_index"]
-        self._last: Frame | None = None
-        self._ws: Any = None
+        super().__init__(client, info, stream)
         self._lock = asyncio.Lock()
-        self.stream = stream
 
     async def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False,
                     outputs: list[str] | None = None, changed_only: bool = False) -> Frame:
         doc = self._request(cameras, dt, cut, outputs, changed_only)
         async with self._lock:  # one frame at a time: the reply order is the send order
             if self.stream:
-                answer = await self._stream_call(doc)
-            else:
-                answer = await self.client.call("POST", f"/v1/sessions/{self.id}/frames", doc)
-            f = frame_of(answer, self._last)
-            self._last = f
-            self.frame_index = f.frame_index + 1
-            return f
+                return self._received(await self._stream_call(doc))
+            return self._received(await self.client.call("POST", self._path, doc))
 
     async def _stream_call(self, doc: dict[str, Any]) -> Any:
         from websockets.asyncio.client import connect
 
         if self._ws is None:
-            headers = {"Authorization": f"Bearer {self.client.api_key}"} \
-                if self.client.api_key else None
             self._ws = await connect(_ws_url(self.client.url, self.id),
-                                     additional_headers=headers, max_size=None,
+                                     additional_headers=self._ws_headers(), max_size=None,
                                      compression=None)
         try:
             await self._ws.send(dumps(doc, MSGPACK))
-            answer = loads(await self._ws.recv(), MSGPACK)
+            raw = await self._ws.recv()
         except ConnectionClosed as e:
             self._ws = None
             raise _closed(e) from None
-        if "frame_index" not in answer:
-            raise _error(int(answer.get("status", 400)), answer)
-        return answer
+        return _stream_answer(raw)
 
     async def close(self, delete: bool = True) -> None:
         if self._ws is not None:
