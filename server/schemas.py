@@ -123,7 +123,7 @@ def http_send(url: str) -> Any:
     from urllib.parse import urlsplit
 
     parts = urlsplit(url)
-    conn = http.client.HTTPConnection(parts.hostname, parts.port, timeout=60)
+    conn = http.client.HTTPConnection(parts.hostname, parts.port, timeout=600)
 
     def send(method: str, path: str, body: bytes, encoding: str) -> tuple[int, bytes]:
         conn.request(method, path, body=body, headers={"Content-Type": encoding,
