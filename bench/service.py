@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import http.client
-import importlib.util
 import os
 import shlex
 import socket
@@ -45,31 +44,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from common import fmt_count, git_commit, machine, markers, parse_sizes, say, write_results
 
 import lightsched
 from lightsched.scenes import DT, city, move_lights
 
 HERE = Path(__file__).resolve().parent
-BEGIN = "<!-- bench/service.py: begin (generated, do not edit by hand) -->"
-END = "<!-- bench/service.py: end -->"
+BEGIN, END = markers("service.py")
 
-
-def _load_core() -> Any:
-    spec = importlib.util.spec_from_file_location("bench_core", HERE / "core.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-_core = _load_core()
-say = _core.say
-parse_sizes = _core.parse_sizes
-fmt_count = _core.fmt_count
-machine = _core.machine
-git_commit = _core.git_commit
-
-# Imported after bench/core.py so a missing client package fails with a clear message below.
+# A missing client package fails with a clear message.
 try:
     from lightsched_client import Client
     from lightsched_client.client import frame_of
@@ -392,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
     say(f"\n{time.perf_counter() - t0:.0f} s in all; 1-minute load average {load[0]:.2f} before, "
         f"{load[1]:.2f} after")
     if args.write:
-        _core.write_results(render(rows, args, load), BEGIN, END)
+        write_results(render(rows, args, load), BEGIN, END)
     return 0
 
 
