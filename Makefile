@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test run lint bench clean
+.PHONY: test run lint bench bench-quick clean
 
 $(STAMP): pyproject.toml clients/python/pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -22,9 +22,13 @@ test: $(STAMP) lint
 run: $(STAMP)
 	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
 
+# Every benchmark, each writing its section of bench/RESULTS.md and its plots.
 bench: $(STAMP)
-	$(BIN)/python bench/core.py
-	$(BIN)/python bench/service.py
+	$(BIN)/python bench/run_all.py
+
+# The ~2-minute cut of the same.
+bench-quick: $(STAMP)
+	$(BIN)/python bench/run_all.py --quick
 
 clean:
 	rm -rf $(VENV) build *.egg-info

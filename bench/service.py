@@ -340,6 +340,11 @@ def render(rows: list[dict[str, Any]], args: argparse.Namespace, load: tuple[flo
     out += ["", "Issue targets (session frame over HTTP, round trip): 1k objects p50 <= 2 ms "
             "and p99 <= 5 ms; 10k objects p50 <= 10 ms. This run:", ""]
     out += [f"- {v}" for v in verdicts(rows)]
+    full = {r["n"]: r for r in rows if r["via"] == "HTTP" and r["mode"] == "full"}
+    if full:
+        out += ["", "**Answer (service latency):** a session frame round trip over HTTP takes "
+                + "; ".join(f"p50 {r['p50']:.2f} ms, p99 {r['p99']:.2f} ms at {fmt_count(n)} objects"
+                            for n, r in sorted(full.items())) + "."]
     out += ["", END]
     return "\n".join(out) + "\n"
 
@@ -356,7 +361,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="runs per case, each with a new session (default 2)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--write", action="store_true", help="write the table into bench/RESULTS.md")
+    p.add_argument("--quick", action="store_true",
+                   help="a cut for make bench-quick: a fifth of the frames, one run")
     args = p.parse_args(argv)
+    if args.quick:
+        args.frames, args.runs = args.frames * 0.2, 1
     if args.frames <= 0 or args.warmup < 0 or args.runs < 1:
         p.error("--frames must be > 0, --warmup >= 0 and --runs >= 1")
 
