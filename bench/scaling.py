@@ -25,6 +25,7 @@ from core import make_scene, run_sequence, stage_names
 from tqdm import tqdm
 
 from lightsched import Config, Scheduler
+from lightsched.scenes import dungeon22, large_world, split_screen, stadium
 
 BEGIN, END = markers("scaling.py")
 
@@ -65,7 +66,32 @@ def measure(n: int, l: int, args: argparse.Namespace, cache: dict) -> dict[str, 
     return out
 
 
-def render(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace) -> str:
+def named_scenes(quick: bool) -> dict[str, Any]:
+    """The harness's named scenes (lightsched.scenes), each with the Config it recommends."""
+    n = 10_000 if quick else 100_000
+    return {"dungeon-22 (K = 4)": dungeon22(seed=0),
+            "stadium (1,000 floodlights)": stadium(seed=0),
+            f"large-world ({fmt_count(n)}, 1e7 m out)": large_world(n, n // 10, seed=0),
+            f"split-screen ({fmt_count(n)}, 4 cameras)": split_screen(n, n // 10, seed=0)}
+
+
+def measure_named(args: argparse.Namespace) -> list[dict[str, Any]]:
+    out = []
+    for name, scene in tqdm(named_scenes(args.quick).items(), desc="scenes", file=sys.stderr):
+        config = scene.config or Config()
+        n = len(scene.objects["id"])
+        frames = frames_for(n, len(scene.lights["id"]), args.quick)
+        runs = [run_sequence(Scheduler, scene, config, frames, 2) for _ in range(args.runs)]
+        run_ms = [float(np.median(r["times"])) * 1e3 for r in runs]
+        out.append({"name": name, "n": n, "l": len(scene.lights["id"]), "k": config.max_lights,
+                    "median": float(np.median(run_ms)), "lo": min(run_ms), "hi": max(run_ms),
+                    "visible": runs[-1]["visible_objects"], "mean_set": runs[-1]["mean_set"]})
+        say(f"{name:<34} {out[-1]['median']:8.2f} ms (runs {out[-1]['lo']:.2f}..{out[-1]['hi']:.2f})")
+    return out
+
+
+def render(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace,
+           named: list[dict[str, Any]]) -> str:
     m = machine()
     cmd = "python bench/scaling.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
     out = [BEGIN, "", "## Scaling (`bench/scaling.py`)", "",
@@ -92,6 +118,12 @@ def render(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace) -
         out += ["", f"**Answer (scaling):** along the diagonal (L = N/10) the frame time grows as "
                 f"N^{slope:.2f} from {fmt_count(a['n'])} to {fmt_count(b['n'])} objects (1.0 is "
                 f"linear): {a['median']:.2f} ms to {b['median']:.1f} ms."]
+    out += ["", "The named scenes of `lightsched.scenes` (each with its recommended Config, lights "
+            "moving every frame):", "", "| scene | N | L | K | frame ms | run medians | visible | "
+            "mean set |", "|---|---|---|---|---|---|---|---|"]
+    for r in named:
+        out.append(f"| {r['name']} | {r['n']} | {r['l']} | {r['k']} | {r['median']:.2f} | "
+                   f"{r['lo']:.2f}..{r['hi']:.2f} | {r['visible']} | {r['mean_set']:.2f} |")
     out += ["", END]
     return "\n".join(out) + "\n"
 
@@ -139,8 +171,9 @@ def main(argv: list[str] | None = None) -> int:
         results[sweep].append(r)
         say(f"{sweep:<20} N={fmt_count(n):>5} L={fmt_count(l):>5}: {r['median']:8.2f} ms "
             f"(runs {r['lo']:.2f}..{r['hi']:.2f})")
+    named = measure_named(args)
     if args.write:
-        write_results(render(results, args), BEGIN, END)
+        write_results(render(results, args, named), BEGIN, END)
         plot(results)
         say(f"wrote bench/RESULTS.md and {PLOTS / 'scaling.png'}")
     return 0
