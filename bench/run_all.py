@@ -65,7 +65,7 @@ def render(status: dict[str, str], quick: bool, seconds: float) -> str:
            f"numpy {m['numpy']}, numba {m['numba']}.", "",
            "| script | run | section |", "|---|---|---|"]
     for script in SCRIPTS:
-        out.append(f"| `bench/{script}` | {status.get(script, 'not run')} | "
+        out.append(f"| `bench/{script}` | {status.get(script, 'not run by this command')} | "
                    f"{'below' if script in found else 'missing'} |")
     out += ["", "What the sections below answer:", ""]
     out += answers(found) or ["- (no section states an answer yet)"]
@@ -76,7 +76,8 @@ def render(status: dict[str, str], quick: bool, seconds: float) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="the ~2-minute cut (make bench-quick)")
-    p.add_argument("--only", nargs="*", default=None, help="run only these scripts")
+    p.add_argument("--only", nargs="*", default=None,
+                   help="run only these scripts (none: just rewrite the summary)")
     args = p.parse_args(argv)
     t0 = time.perf_counter()
     status: dict[str, str] = {}

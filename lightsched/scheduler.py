@@ -283,13 +283,14 @@ class Scheduler(SceneAPI):
             hidden = np.flatnonzero(casts & ~vis_o)
             radius = lights.radius[rows_l]
             reach = lights.position[rows_l]
-            region = np.concatenate([(reach - radius[:, None]).min(0),
-                                     (reach + radius[:, None]).max(0)])
-            g_f, dims = grid_shape(region[:3], region[3:],
-                                   CELL_PER_RADIUS * float(np.median(radius)))
+            r_lo = (reach - radius[:, None]).min(0)
+            r_hi = (reach + radius[:, None]).max(0)
+            near = (hi[hidden] >= r_lo).all(1) & (lo[hidden] <= r_hi).all(1)
+            hidden = hidden[near]
+            g_f, dims = grid_shape(r_lo, r_hi, CELL_PER_RADIUS * float(np.median(radius)))
             h_lo, h_hi = lo[hidden], hi[hidden]
             h_pos_rows, h_pos, h_start = visible_order(h_lo, h_hi, np.ones(hidden.size, bool),
-                                                       g_f, dims, region)
+                                                       g_f, dims)
             nh = h_pos_rows.size
             if nh:
                 n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
