@@ -37,10 +37,19 @@ FRAME_ARRAYS: dict[str, Any] = {
 }
 
 
-# Per-object arrays and the value of an empty slot (DESIGN section 3).
-_PER_OBJECT = {"visible": False, "count": 0, "candidates": 0, "light_ids": -1,
-               "light_index": -1, "priority": 0, "fade_weight": 0, "fade_state": 0,
-               "slot_shadow": -1}
+# Per-object arrays: dtype, shape ("N" or "NK") and the value of an empty slot (DESIGN
+# section 3), in the order pairs.object_pass writes them (after "visible").
+PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
+    "visible": (np.bool_, "N", False),
+    "light_ids": (np.int32, "NK", -1),
+    "light_index": (np.int32, "NK", -1),
+    "priority": (np.float32, "NK", 0),
+    "fade_weight": (np.float32, "NK", 0),
+    "fade_state": (np.uint8, "NK", 0),
+    "count": (np.int32, "N", 0),
+    "candidates": (np.int32, "N", 0),
+    "slot_shadow": (np.int8, "NK", -1),
+}
 
 
 @dataclass
@@ -82,9 +91,9 @@ def freeze(frame: Frame) -> Frame:
 def _empty(name: str, n: int, k: int, cascades: int) -> np.ndarray:
     """One array of a frame where no object has a light (DESIGN section 3 empty slots)."""
     dtype = FRAME_ARRAYS[name]
-    if name in _PER_OBJECT:
-        shape = (n,) if name in ("visible", "count", "candidates") else (n, k)
-        return np.full(shape, _PER_OBJECT[name], dtype)
+    if name in PER_OBJECT:
+        _, kind, fill = PER_OBJECT[name]
+        return np.full((n,) if kind == "N" else (n, k), fill, dtype)
     if name == "cascade_splits":
         return np.zeros((0, cascades + 1), dtype)
     return np.zeros(1 if name == "caster_offsets" else 0, dtype)

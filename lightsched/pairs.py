@@ -34,7 +34,7 @@ import numpy as np
 
 from .fade import fade_object
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
-from .scene import DIRECTIONAL, SPOT
+from .scene import DIRECTIONAL, ON, SPOT
 from .select import (
     F_NEW_P,
     F_NEW_W,
@@ -422,6 +422,67 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     return keep
 
 
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def affects_any(lights, rows, grid, vis):
+    """Per light of ``rows`` (parallel): whether it affects at least one object of the grid
+    (DESIGN "Affects": mask, range, cone), stopping at the first hit. An incremental frame
+    asks this of its shadowed lights, the shadow ranking's candidates, instead of walking
+    every light."""
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    vis_box = vis[0]
+    out = np.zeros(rows.shape[0], np.bool_)
+    for t in nb.prange(rows.shape[0]):
+        j = rows[t]
+        lm = np.int64(hot[j, 4])
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        hit = False
+        if typ == DIRECTIONAL:
+            for v in range(vis_box.shape[0]):
+                if np.int64(vis_box[v, 6]) & lm != 0:
+                    hit = True
+                    break
+            out[t] = hit
+            continue
+        c = _light_cells(hot, j, g_f, dims, ext)
+        rr = _reach2(hot, j)
+        for x in range(c[0], c[3] + 1):
+            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+            if hit or dxx > rr:
+                continue
+            for y in range(c[1], c[4] + 1):
+                if hit:
+                    break
+                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
+                for v in range(v0, v1):
+                    if _affects(hot, lf, j, lm, typ, v, vis_box):
+                        hit = True
+                        break
+        for b in range(big_pos.shape[0]):
+            if hit:
+                break
+            hit = _affects(hot, lf, j, lm, typ, big_pos[b], vis_box)
+        out[t] = hit
+    return out
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _affects(hot, lf, j, lm, typ, v, vis_box):
+    """DESIGN "Affects" of point or spot light j (mask lm) and visible object v."""
+    if np.int64(vis_box[v, 6]) & lm == 0:
+        return False
+    r = hot[j, 3]
+    d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
+    if not d2 <= r * r:
+        return False
+    if typ != SPOT:
+        return True
+    e2 = vis_box[v, 7]
+    geo = ((vis_box[v, 0] + vis_box[v, 3]) / 2, (vis_box[v, 1] + vis_box[v, 4]) / 2,
+           (vis_box[v, 2] + vis_box[v, 5]) / 2, math.sqrt(e2) / 2, e2)
+    return spot_cone(hot, lf, j, geo, False)[0]
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
     """Appends (object row, caster mask) of grid position v for shadowed light row j at n
@@ -539,23 +600,28 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
-    """For every object (parallel, rows in order): top-K with hysteresis, fade, outputs.
+def object_pass(run, objs, lists, lights, state, out, params, shadow):
+    """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
+    fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
+    copied them from the last frame).
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
-    (step 3 of Fade); lists = (start, obj_pairs) from group_pairs; ids = light ids by row;
-    state_in = (slot ids, slot weights f64, slot states, selected ids), each [N, K] (the
-    ids and states are last frame's light_ids and fade_state outputs); state_out =
-    (slot weights f64, selected ids); out = (light_ids, light_index, priority f32,
-    fade_weight f32, fade_state, count, candidates, slot_shadow int8); params = (h, h_abs,
-    dt/fade_in, dt/fade_out, fade_in, fade_out); shadow = (shadow map index per light row
-    or -1, max_shadowed_per_object).
+    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in heap,
+    heap [H, 2] (P, light row)): the pair cache; lights = (light id by row, live by row:
+    visible, and not removed by unshadowed = "skip"; pairs of other lights are kept in the
+    cache but do not compete); state = (slot ids, slot weights f64, slot states, selected
+    ids), each [N, K]: the ids and states are last frame's light_ids and fade_state
+    outputs, the weights and selection are updated in place; out = (light_ids,
+    light_index, priority f32, fade_weight f32, fade_state, count, candidates, slot_shadow
+    int8, fading bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in,
+    dt/fade_out, fade_in, fade_out); shadow = (shadow map index per light row or -1,
+    max_shadowed_per_object).
     """
     visible, reset = objs
-    start, obj_pairs = lists
-    s_id, s_w, s_st, s_sel = state_in
-    n_w, n_sel = state_out
-    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow = out
+    seg, heap = lists
+    ids, live = lights
+    s_id, s_w, s_st, s_sel = state
+    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow, o_fading = out
     shadow_of_row, max_shadowed = shadow
     any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
     h = params[0]
@@ -564,13 +630,14 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
     dec = params[3]
     fade_in = params[4]
     fade_out = params[5]
-    n_obj = visible.shape[0]
+    n_run = run.shape[0]
     k = s_id.shape[1]
-    n_chunks = (n_obj + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
-        for o in range(ch * OBJECT_CHUNK, min(n_obj, (ch + 1) * OBJECT_CHUNK)):
+        for r in range(ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)):
+            o = run[r]
             cnt = 0
             nbest = 0
             cand = 0
@@ -581,41 +648,151 @@ def object_pass(objs, lists, ids, state_in, state_out, out, params, shadow):
                     si[I_OLD_ST, m] = s_st[o, m]
                     si[I_PREV_SEL, m] = s_sel[o, m]
                     si[I_OLD_ROW, m] = -1
-                cand = start[o + 1] - start[o]
+                a = seg[o, 0]
+                b = a + seg[o, 1]
+                for t in range(a, b):
+                    cand += live[np.int64(heap[t, 1])]
                 if cand <= k:
                     # Every competing light is selected: no keys, no ranking to keep.
-                    for t in range(cand):
-                        p = obj_pairs[start[o] + t, 0]
-                        j = np.int64(obj_pairs[start[o] + t, 1])
+                    for t in range(a, b):
+                        j = np.int64(heap[t, 1])
+                        if not live[j]:
+                            continue
+                        p = heap[t, 0]
                         lid = np.int64(ids[j])
                         _match_old_slot(p, j, lid, sf, si)
-                        sf[F_P, t] = p
-                        si[I_ID, t] = lid
-                        si[I_ROW, t] = j
-                    nbest = cand
+                        sf[F_P, nbest] = p
+                        si[I_ID, nbest] = lid
+                        si[I_ROW, nbest] = j
+                        nbest += 1
                 else:
-                    for t in range(start[o], start[o + 1]):
-                        nbest = _select(obj_pairs[t, 0], np.int64(obj_pairs[t, 1]), ids, sf,
-                                        si, nbest, h, h_abs)
+                    for t in range(a, b):
+                        j = np.int64(heap[t, 1])
+                        if live[j]:
+                            nbest = _select(heap[t, 0], j, ids, sf, si, nbest, h, h_abs)
                 cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
+            fading = False
             for m in range(k):
                 if m < cnt:
-                    n_w[o, m] = sf[F_NEW_W, m]
+                    st = si[I_NEW_ST, m]
+                    fading |= st != ON
+                    s_w[o, m] = sf[F_NEW_W, m]
                     o_ids[o, m] = si[I_NEW_ID, m]
                     o_index[o, m] = si[I_NEW_ROW, m]
                     o_prio[o, m] = np.float32(sf[F_NEW_P, m])
                     o_w[o, m] = np.float32(sf[F_NEW_W, m])
-                    o_st[o, m] = si[I_NEW_ST, m]
+                    o_st[o, m] = st
                 else:
-                    n_w[o, m] = 0.0
+                    s_w[o, m] = 0.0
                     o_ids[o, m] = -1
                     o_index[o, m] = -1
                     o_prio[o, m] = 0.0
                     o_w[o, m] = 0.0
                     o_st[o, m] = 0
                 o_shadow[o, m] = -1
-                n_sel[o, m] = si[I_ID, m] if m < nbest else -1
+                s_sel[o, m] = si[I_ID, m] if m < nbest else -1
             o_count[o] = cnt
             o_cand[o] = cand
+            o_fading[o] = fading
             if any_shadow:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
+
+
+# --------------------------------------------------------------------------- pair cache
+#
+# The pairs of a frame are kept for the next one (DESIGN section 6): per object row a
+# segment (start, length) of a heap of (P, light row) records. An incremental frame
+# rewrites only the segments of objects whose pairs changed, appending them to the heap;
+# the segments it no longer points to are garbage until the heap is compacted.
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def scan_pairs(seg, heap, light_flag):
+    """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
+    so an incremental frame finds the objects that hold a pair of a changed light."""
+    n = seg.shape[0]
+    out = np.zeros(n, np.uint8)
+    n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    for ch in nb.prange(n_chunks):
+        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            acc = 0
+            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
+                acc |= light_flag[np.int64(heap[t, 1])]
+            out[o] = acc
+    return out
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def compact_heap(seg, heap, spare):
+    """The live segments of the heap packed into a new heap with ``spare`` free records
+    after them; returns (new seg, new heap, records used). Segment order is row order."""
+    n = seg.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for o in range(n):
+        start[o + 1] = start[o] + seg[o, 1]
+    used = start[n]
+    new_heap = np.empty((used + spare, 2))
+    new_seg = np.empty_like(seg)
+    n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    for ch in nb.prange(n_chunks):
+        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            a = seg[o, 0]
+            d = start[o]
+            for t in range(seg[o, 1]):
+                new_heap[d + t, 0] = heap[a + t, 0]
+                new_heap[d + t, 1] = heap[a + t, 1]
+            new_seg[o, 0] = d
+            new_seg[o, 1] = seg[o, 1]
+    return new_seg, new_heap, used
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def replace_lists(rows, mode, cache, walked, fresh, used):
+    """New pair lists of the object ``rows`` (ascending), appended to the heap from record
+    ``used`` (the caller made room: see ``list_sizes``). mode per row: 0 empty (the object
+    left the view), 1 only its ``fresh`` pairs (its lists were rebuilt against every light:
+    it moved or came into view), 2 its cached pairs of lights not flagged in ``walked``
+    followed by its fresh pairs (lights that changed were walked again). cache = (seg,
+    heap), updated in place; fresh = (start [N+1], pairs [F, 2]) grouped by object row."""
+    seg, heap = cache
+    f_start, f_pairs = fresh
+    sizes = list_sizes(rows, mode, cache, walked, fresh)
+    at = np.empty(rows.shape[0] + 1, np.int64)
+    at[0] = used
+    for r in range(rows.shape[0]):
+        at[r + 1] = at[r] + sizes[r]
+    for r in nb.prange(rows.shape[0]):
+        o = rows[r]
+        d = at[r]
+        if mode[r] == 2:
+            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
+                if not walked[np.int64(heap[t, 1])]:
+                    heap[d, 0] = heap[t, 0]
+                    heap[d, 1] = heap[t, 1]
+                    d += 1
+        if mode[r] != 0:
+            for t in range(f_start[o], f_start[o + 1]):
+                heap[d, 0] = f_pairs[t, 0]
+                heap[d, 1] = f_pairs[t, 1]
+                d += 1
+        seg[o, 0] = at[r]
+        seg[o, 1] = d - at[r]
+    return at[rows.shape[0]]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def list_sizes(rows, mode, cache, walked, fresh):
+    """Records each new list of ``replace_lists`` takes."""
+    seg, heap = cache
+    f_start = fresh[0]
+    sizes = np.zeros(rows.shape[0], np.int64)
+    for r in range(rows.shape[0]):
+        o = rows[r]
+        c = 0
+        if mode[r] == 2:
+            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
+                c += not walked[np.int64(heap[t, 1])]
+        if mode[r] != 0:
+            c += f_start[o + 1] - f_start[o]
+        sizes[r] = c
+    return sizes

@@ -411,6 +411,9 @@ class LightStore:
     shadows: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
     mask: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint32))
     version: int = 0
+    # Rows that update_lights calls wrote since the last frame (dirty rows; a scheduler
+    # compares them with last frame's values and clears this after each frame).
+    touched: tuple[np.ndarray, ...] = ()
 
     def __len__(self) -> int:
         return int(self.id.size)
@@ -507,6 +510,7 @@ class LightStore:
         order = np.argsort(cols["id"], kind="stable")
         for f in LIGHT_FIELDS:
             setattr(self, f, np.ascontiguousarray(cols[f][order]))
+        self.touched = ()  # rows are renumbered: a scheduler compares ids instead
         self.version += 1
 
 
@@ -528,6 +532,8 @@ class ObjectStore:
     is_new: np.ndarray = field(default_factory=lambda: np.zeros(0, np.bool_))
     state: dict[str, tuple[np.ndarray, Any]] = field(default_factory=dict)
     version: int = 0
+    # Rows that update_objects calls wrote since the last frame (see LightStore.touched).
+    touched: tuple[np.ndarray, ...] = ()
 
     def __len__(self) -> int:
         return int(self.id.size)
@@ -594,6 +600,7 @@ class ObjectStore:
         for f in OBJECT_FIELDS:
             setattr(self, f, np.ascontiguousarray(cols[f][order]))
         self.is_new = new_flag
+        self.touched = ()  # rows are renumbered: a scheduler compares ids instead
         self.version += 1
 
     def keep_rows(self, keep: np.ndarray) -> None:
@@ -602,6 +609,7 @@ class ObjectStore:
         self.is_new = self.is_new[keep]
         for name, (arr, fill) in self.state.items():
             self.state[name] = (arr[keep], fill)
+        self.touched = ()
         self.version += 1
 
 
@@ -616,13 +624,17 @@ def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str,
             what: str) -> None:
     """update_ of some fields by id: validates the merged rows, then writes them."""
     ids, rows = _id_rows(store.id, fields.pop("id", None), what)
+    given = [f for f in names[1:] if fields.get(f) is not None]
     cols = validate(fields, store.columns(rows), ids.size)
-    for f in names[1:]:
+    # Only given fields can change (validate takes the others from the rows as they are).
+    for f in given:
         # Copy on write: a store's arrays are never changed in place, so a shallow copy of
-        # the store is a snapshot (SceneAPI.apply rolls back to one).
+        # the store is a snapshot (SceneAPI.apply rolls back to one), and a scheduler can
+        # keep last frame's arrays to see which rows changed.
         arr = getattr(store, f).copy()
         arr[rows] = cols[f]
         setattr(store, f, arr)
+    store.touched = store.touched + (rows,)
     store.version += 1
 
 
@@ -713,6 +725,8 @@ class SceneAPI:
         if not isinstance(cut, (bool, np.bool_)):
             raise ValidationError("cut", None, "must be a boolean")
         result = self._frame(cams, dt_, bool(cut))
+        self.lights.touched = ()
+        self.objects.touched = ()
         self.objects.is_new[:] = False
         self.frame_index += 1
         return result

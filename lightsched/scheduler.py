@@ -1,30 +1,48 @@
-"""Scheduler and schedule(): run the stages of DESIGN section 2 on the fast path.
+"""Scheduler and schedule(): run the stages of DESIGN section 2 on the fast path, in full or
+incrementally (section 6).
 
 Takes the stores (scene.py) and cameras; returns a Frame (frame.py). Stages, each timed in
-stats["seconds"]: cameras (frustum.py), visibility (frustum.py), pack (priority.py), grid
-(its shape), order (visible objects by cell), prep (their records), pairs (Affects and P
-per light), shadows (ranking and tiers, shadows.py), casters (culling volumes and caster
-lists), group (pairs by object), objects (top-K and fade per object), output; pairs.py
-describes the light-major pipeline.
+stats["seconds"]: cameras (frustum.py), changes (what differs from the last frame,
+changes.py), visibility (frustum.py), pack (priority.py), grid (the grid of visible
+objects: its shape, their order, their records), pairs (Affects and P per light, pairs.py),
+shadows (ranking and tiers, shadows.py), casters (culling volumes and caster lists), lists
+(the pair cache: grouping by object, or the rewrite of the changed objects' lists),
+objects (top-K and fade per object), output.
+
+A full frame computes every pair; an incremental one keeps the last frame's pair cache
+(per object its (P, light row) pairs, pairs.py) and recomputes only what changed:
+- lights whose fields changed, or that entered or left the view, walk the grid of visible
+  objects again; the objects that held a pair of theirs or get one now rewrite their lists;
+- objects that moved or came into view get new lists against every light (a small grid of
+  just them, walked by every light); objects that left the view lose theirs;
+- the object pass runs on those objects, on the objects holding a pair of a light whose
+  shadow map or "skip" status changed, and on the objects still fading; the other rows of
+  the outputs are the last frame's (shared outright when no row changed).
+Results equal a full frame's: an object whose pairs, slots and shadow maps did not change
+gets the same row again (selection with hysteresis is a fixed point of unchanged P).
+
 The per-object state (slots, weights, last frame's selection) lives in the object store's
-``state`` so it follows ids through set_/remove_ calls; the slot ids and states are the last
-(read-only) frame's light_ids and fade_state. A frame computes the new state into other
-arrays and swaps it in only when everything succeeded.
+``state`` so it follows ids through set_/remove_ calls; the slot ids and states are the
+last (read-only) frame's light_ids and fade_state.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numba as nb
 import numpy as np
 
-from .frame import Frame, empty_frame, freeze
+from .changes import camera_key, changed_rows, same_key
+from .frame import PER_OBJECT, Frame, empty_frame, freeze
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
 from .pairs import (
     GROUP_PARTS,
     RUN_SPLIT,
+    affects_any,
+    compact_heap,
     grid_casters,
     grid_shape,
     group_pairs,
@@ -32,24 +50,72 @@ from .pairs import (
     light_order,
     light_pass,
     object_pass,
+    replace_lists,
+    scan_pairs,
     visible_objects,
     visible_order,
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
-from .scene import DIRECTIONAL, Camera, Config, SceneAPI
+from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
 from .shadows import culling_volumes, rank_shadow_lights, sweep_casters
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
 # Grid cell edge over the median light radius (measured on the city bench, see RESULTS.md).
 CELL_PER_RADIUS = 1.0
+# An incremental frame beyond this share of changed lights or objects costs about what a
+# full one does: run the full frame.
+FULL_SHARE = 0.5
 
+# The fields whose change alters an object's pairs (casts_shadows changes only casters).
+PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
 
 # Per-object state: slot ids and states are the frame's own (read-only) light_ids and
 # fade_state outputs; the float64 weights and last frame's selection are kept apart.
 _STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
           ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
-_KEPT = (("slot_weight", np.float64), ("selected", np.int32))
+
+# light_flag bits of an incremental frame (pairs.scan_pairs): the light's pairs are
+# replaced (it changed, or entered or left the view); the objects holding its pairs must
+# select again (its shadow map or "skip" status changed).
+WALKED, RESELECT = 1, 2
+
+
+@dataclass
+class _Grid:
+    """The grid of visible objects a frame walked: (origin and 1/h, dims, cell_start, ext,
+    big_pos) and the per-position records (vis_box [V, 8], object row per position)."""
+
+    grid: tuple
+    vis: tuple
+    plan: str
+
+
+@dataclass
+class _Cache:
+    """What a frame keeps for the next one (DESIGN section 6). Store arrays are never
+    changed in place, so keeping references to the ones this frame read is enough to see
+    later which rows changed."""
+
+    lights: dict[str, np.ndarray]
+    objects: dict[str, np.ndarray]
+    cam_key: np.ndarray
+    frames: CameraFrames
+    splits: np.ndarray
+    vis_l: np.ndarray
+    vis_o: np.ndarray
+    box: np.ndarray            # bounding box of the visible objects (lo, hi)
+    compete: np.ndarray        # visible lights that compete for slots
+    packed: tuple[np.ndarray, np.ndarray]
+    grid: _Grid
+    seg: np.ndarray            # pair cache: per object (start, length) in heap
+    heap: np.ndarray           # (P, light row) records
+    used: int                  # heap records in use (live or garbage)
+    live: np.ndarray
+    shadow_of_row: np.ndarray
+    fading: np.ndarray         # per object: a slot is fading in or out
+    frame: Frame
+    casters: dict[int, tuple[np.ndarray, np.ndarray]]   # light row -> (object rows, masks)
 
 
 class Scheduler(SceneAPI):
@@ -62,9 +128,9 @@ class Scheduler(SceneAPI):
             self.objects.add_state(name, (k,), dtype, fill)
         self.objects.add_state("was_visible", (), np.bool_, False)
         self._buffers: dict[str, np.ndarray] = {}
-        self._spare_state: tuple[np.ndarray, ...] | None = None
         # Last frame's shadow lights (ids) and their tiers, for the two hystereses.
         self._shadow_prev = (np.zeros(0, np.int32), np.zeros(0, np.int64))
+        self._cache: _Cache | None = None
 
     def _scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
         """A reusable buffer of at least ``size`` elements (grown by half when short), so a
@@ -75,145 +141,259 @@ class Scheduler(SceneAPI):
             self._buffers[name] = buf
         return buf
 
+    # ------------------------------------------------------------------ the frame
+
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg = self.config
-        lights, objs = self.lights, self.objects
-        k = cfg.max_lights
         seconds: dict[str, float] = {}
         plan: dict[str, str] = {}
         t = time.perf_counter()
-
-        frames = CameraFrames(cameras)
-        splits = cascade_splits(cameras, cfg.cascades, cfg.shadow_distance)
+        c = self._cache
+        key = camera_key(cameras)
+        same_cams = c is not None and same_key(key, c.cam_key)
+        if same_cams:
+            frames, splits = c.frames, c.splits
+        else:
+            frames = CameraFrames(cameras)
+            splits = cascade_splits(cameras, cfg.cascades, cfg.shadow_distance)
         t = _lap(seconds, "cameras", t)
 
+        why, lrows, orows, orows_cast = self._changes(c, same_cams)
+        t = _lap(seconds, "changes", t)
+        if why is None:
+            assert c is not None
+            if (lrows.size == 0 and orows.size == 0 and orows_cast.size == 0 and same_cams
+                    and not cut and not c.fading.any()):
+                return self._unchanged(c, seconds, t)
+            frame = self._step(c, frames, splits, key, same_cams, lrows, orows, orows_cast,
+                               dt, cut, seconds, plan, t)
+        else:
+            frame = self._step(None, frames, splits, key, False, None, None, None, dt, cut,
+                               seconds, plan, t)
+            plan["frame"] = "full: " + why
+        return frame
+
+    def _changes(self, c: _Cache | None, same_cams: bool
+                 ) -> tuple[str | None, Any, Any, Any]:
+        """(why the frame must be full, or None; changed light rows; object rows whose
+        pairs change; object rows whose casts_shadows changed)."""
+        if c is None:
+            return "first frame", None, None, None
+        cfg = self.config
+        lrows = changed_rows(c.lights, self.lights, LIGHT_FIELDS)
+        if lrows is None:
+            return "the light set changed (set_lights or remove_lights)", None, None, None
+        orows = changed_rows(c.objects, self.objects, PAIR_OBJECT_FIELDS)
+        if orows is None:
+            return "the object set changed (set_objects or remove_objects)", None, None, None
+        orows_cast = changed_rows(c.objects, self.objects, ("id", "casts_shadows"))
+        if not same_cams and cfg.model == "thesis":
+            return "the cameras moved (thesis priorities depend on them)", None, None, None
+        if lrows.size > FULL_SHARE * max(len(self.lights), 1):
+            return f"{lrows.size} of {len(self.lights)} lights changed", None, None, None
+        if orows.size > FULL_SHARE * max(len(self.objects), 1):
+            return f"{orows.size} of {len(self.objects)} objects changed", None, None, None
+        return None, lrows, orows, orows_cast
+
+    def _unchanged(self, c: _Cache, seconds: dict[str, float], t: float) -> Frame:
+        """Nothing moved, nothing fades, no cut: the last frame's arrays are this frame's
+        (frames are read-only, so they can share them)."""
+        last = c.frame
+        frame = Frame(**last.arrays())
+        seconds["total"] = sum(seconds.values()) + (time.perf_counter() - t)
+        plan = {stage: f"{text} (kept: nothing changed)"
+                for stage, text in last.stats["plan"].items() if stage != "frame"}
+        plan["frame"] = ("unchanged: nothing moved and no slot is fading; the last frame's "
+                         "outputs are shared")
+        frame.stats = {
+            "plan": plan,
+            "counts": dict(last.stats["counts"], recomputed_objects=0, changed_lights=0,
+                           changed_objects=0),
+            "seconds": seconds,
+        }
+        return frame
+
+    def _step(self, c: _Cache | None, frames: CameraFrames, splits: np.ndarray,
+              key: np.ndarray, same_cams: bool, lrows: Any, orows: Any, orows_cast: Any,
+              dt: float, cut: bool, seconds: dict[str, float], plan: dict[str, str],
+              t: float) -> Frame:
+        """One frame: in full when ``c`` is None, else incrementally from the cache ``c``
+        with the changed light rows ``lrows`` and object rows ``orows`` (pairs) and
+        ``orows_cast`` (casts_shadows)."""
+        cfg = self.config
+        lights, objs = self.lights, self.objects
+        n, n_l = len(objs), len(lights)
+        full = c is None
+
+        # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
                                frames.plane_p)
-        vis_o, b = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
-                                   frames.plane_p)
+        if full or not same_cams or orows.size:
+            vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
+                                         frames.plane_p)
+        else:
+            vis_o, box = c.vis_o, c.box
         t = _lap(seconds, "visibility", t)
 
-        hot, lf = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
+        if full or lrows.size or (not same_cams and cfg.model != "contribution"):
+            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
+        else:
+            packed = c.packed
         is_dir = lights.type == DIRECTIONAL
         # Pairs are found for every visible light: the shadow ranking needs to know which
         # shadowed lights affect a visible object before "skip" removes the others.
         compete = vis_l & (~is_dir if not cfg.directional_in_slots else True)
         t = _lap(seconds, "pack", t)
 
-        rows = np.flatnonzero(compete).astype(np.int32)
-        point_rows = rows[~is_dir[rows]]
-        n_vis = int(np.count_nonzero(vis_o))
-        if n_vis == 0:
-            b = np.zeros(6)
-        if rows.size == 0 or n_vis == 0:
-            plan["pairs"] = "none: no competing light or no visible object"
-        if point_rows.size * n_vis <= BRUTE_FORCE_PAIRS:
-            # One cell holding every visible object: each light tests them all.
-            g_f, dims = grid_shape(b[:3], b[3:], 2.0 * max(float(np.max(b[3:] - b[:3])), 1.0))
-            plan.setdefault("pairs", f"brute force ({rows.size} lights x {n_vis} objects)")
+        # The grid of visible objects: kept while the visible set and its boxes are.
+        if full:
+            fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
-            radii = lights.radius[point_rows]
-            median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
-            g_f, dims = grid_shape(b[:3], b[3:], CELL_PER_RADIUS * median)
+            moved = np.zeros(n, np.bool_)
+            moved[orows] = True
+            fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
+            left_rows = np.flatnonzero(c.vis_o & ~vis_o)
+        if full or fresh_rows.size or left_rows.size:
+            grid = self._visible_grid(vis_o, box, packed, compete, is_dir)
+        else:
+            grid = c.grid
+        plan["pairs"] = grid.plan
+        if not compete.any() or not vis_o.any():
+            plan["pairs"] = "none: no competing light or no visible object"
         t = _lap(seconds, "grid", t)
-        vis_rows, pos_of, cell_start = visible_order(objs.bounds_min, objs.bounds_max, vis_o,
-                                             g_f, dims)
-        t = _lap(seconds, "order", t)
-        nv = vis_rows.size
-        ncell = int(dims[0] * dims[1] * dims[2])
-        n_small = int(cell_start[ncell])
-        vis = (self._scratch("vis_box", nv * 8, np.float64)[:nv * 8].reshape(nv, 8), vis_rows)
-        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of, n_small,
-                              vis[0])
-        big_pos = np.arange(n_small, nv, dtype=np.int32)
-        grid = (g_f, dims, cell_start, ext, big_pos)
-        if "pairs" not in plan:
-            plan["pairs"] = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                             f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {big_pos.size} objects "
-                             f"larger than a cell tested directly), walked by {rows.size} lights")
-        t = _lap(seconds, "prep", t)
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
-        rows = light_order(hot, rows, g_f, dims)
-        offsets = light_bounds(hot, rows, grid, n_vis)
-        pair_obj = self._scratch("pair_obj", int(offsets[-1]), np.int32)
-        pair_p = self._scratch("pair_p", int(offsets[-1]), np.float64)
-        count = light_pass((hot, lf), rows, grid, vis, offsets,
-                           pair_obj, pair_p, np.array([model, cfg.w_obj, cfg.w_int]))
+        p_params = np.array([model, cfg.w_obj, cfg.w_int])
+        if full:
+            rows = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
+                               grid.grid[0], grid.grid[1])
+            fresh = self._walk(packed, rows, grid, p_params, "pair")
+            plan["pairs"] += f", walked by {rows.size} lights"
+            walked = np.zeros(0, np.int64)
+        else:
+            # Lights that changed or entered or left the competition have their pairs
+            # replaced: they walk the grid again (the visible ones).
+            walked = np.union1d(lrows, np.flatnonzero(compete != c.compete))
+            walk = walked[compete[walked]].astype(np.int32)
+            walk = light_order(packed[0], walk, grid.grid[0], grid.grid[1])
+            fresh = self._walk(packed, walk, grid, p_params, "pair")
+            # Objects that moved or came into view: their pairs with every light, from a
+            # grid of just them.
+            if fresh_rows.size:
+                sub = np.zeros(n, np.bool_)
+                sub[fresh_rows] = True
+                small = self._visible_grid(sub, box, packed, compete, is_dir, "small")
+                every = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
+                                    small.grid[0], small.grid[1])
+                fresh_obj = self._walk(packed, every, small, p_params, "small")
+            else:
+                fresh_obj = None
+            plan["pairs"] += (f", walked by {walk.size} changed lights (the other pairs are "
+                              f"kept); {fresh_rows.size} moved or newly visible objects get "
+                              f"new pairs from a grid of them walked by {int(compete.sum())} "
+                              f"lights; {left_rows.size} objects left the view")
         t = _lap(seconds, "pairs", t)
 
         # Shadowed lights (DESIGN section 2): candidates affect a visible object.
         candidate = vis_l & lights.shadows
         shadow_rows, shadow_tier = np.zeros(0, np.int32), np.zeros(0, np.uint16)
         if candidate.any():
-            affects = np.zeros(len(lights), bool)
-            affects[rows] = count > 0
-            sun = is_dir & candidate & ~compete
-            if sun.any():
-                seen = np.bitwise_or.reduce(objs.mask[vis_o]) if n_vis else np.uint32(0)
-                affects[sun] = (lights.mask[sun] & seen) != 0
-            candidate &= affects
+            cand_rows = np.flatnonzero(candidate).astype(np.int32)
+            candidate[cand_rows] = affects_any(packed, cand_rows, grid.grid, grid.vis)
             shadow_rows, shadow_tier = rank_shadow_lights(
                 lights, frames, candidate, self._shadow_prev[0], self._shadow_prev[1],
                 cfg.shadow_budget, cfg.hysteresis, cfg.hysteresis_abs, cfg.c1)
-        shadow_of_row = np.full(len(lights), -1, np.int8)
+        shadow_of_row = np.full(n_l, -1, np.int8)
         shadow_of_row[shadow_rows] = np.arange(shadow_rows.size)
         live = vis_l.copy()
         if cfg.unshadowed == "skip":
             # A shadowed light without a shadow map affects nothing (it would leak
-            # through walls): its pairs are dropped before grouping.
+            # through walls): its pairs stay cached but do not compete.
             live &= ~(lights.shadows & (shadow_of_row < 0))
-            count[~live[rows]] = 0
         dir_rows = np.flatnonzero(live & is_dir) if not cfg.directional_in_slots else \
             np.zeros(0, np.int64)
         dir_p = lights.intensity[dir_rows] + lights.priority[dir_rows]
         directional = lights.id[dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]]
         t = _lap(seconds, "shadows", t)
-        casters, plan["casters"] = self._casters(frames, splits, shadow_rows, (hot, lf), grid,
-                                                 vis, vis_o)
-        t = _lap(seconds, "casters", t)
-        n, n_pairs = len(objs), int(count.sum())
-        lists = (self._scratch("start", n + 1, np.int64)[:n + 1],
-                 self._scratch("obj_pairs", 2 * n_pairs, np.float64)[:2 * n_pairs]
-                 .reshape(n_pairs, 2))
-        hist = self._scratch("hist", GROUP_PARTS * (n + 1), np.int64)
-        group_pairs(rows, offsets, count, pair_obj, pair_p,
-                    (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1),) + lists)
-        t = _lap(seconds, "group", t)
 
+        recompute = np.ones(shadow_rows.size, np.bool_)
+        if not full and same_cams and orows.size == 0 and orows_cast.size == 0:
+            # Casters depend on the light, the cameras and every object: a light none of
+            # them changed for keeps its list.
+            changed_l = np.zeros(n_l, np.bool_)
+            changed_l[lrows] = True
+            recompute = np.array([changed_l[r] or int(r) not in c.casters
+                                  for r in shadow_rows.tolist()], np.bool_)
+        casters, kept_casters, plan["casters"] = self._casters(
+            frames, splits, shadow_rows, packed, grid, vis_o, recompute,
+            None if full else c.casters)
+        t = _lap(seconds, "casters", t)
+
+        # The pair cache: built from this frame's pairs, or the changed lists rewritten.
+        if full:
+            start, heap = self._group(fresh, n)
+            seg = np.empty((n, 2), np.int64)
+            seg[:, 0] = start[:-1]
+            seg[:, 1] = np.diff(start)
+            used = heap.shape[0]
+            run = np.arange(n, dtype=np.int64)
+            plan["lists"] = "grouped by object (every pair new)"
+        else:
+            seg, heap, used, run = self._patch(c, walked, live, shadow_of_row, fresh, fresh_obj,
+                                               fresh_rows, left_rows, cut, vis_o)
+            plan["lists"] = (f"cache kept; {run.size} of {int(vis_o.sum())} visible objects "
+                             f"recomputed (pairs of changed lights, moved or newly visible "
+                             f"objects, shadow-map changes, fading slots"
+                             + (", a cut" if cut else "") + ")")
+        t = _lap(seconds, "lists", t)
+
+        # Selection and fade of the objects to recompute (every object in a full frame).
         reset = objs.is_new | ~objs.get("was_visible")
         if self.frame_index == 0 or cut:
             reset = np.ones(n, np.bool_)
-        state_in = tuple(objs.get(name) for name, _, _ in _STATE)
-        state_out = self._spare_state
-        if state_out is None or state_out[0].shape != (n, k):
-            state_out = tuple(np.empty((n, k), dtype) for _, dtype in _KEPT)
-        out = (np.empty((n, k), np.int32), np.empty((n, k), np.int32),
-               np.empty((n, k), np.float32), np.empty((n, k), np.float32),
-               np.empty((n, k), np.uint8), np.empty(n, np.int32), np.empty(n, np.int32),
-               np.empty((n, k), np.int8))
-        params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
-                           _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
-        object_pass((vis_o, reset), lists, lights.id, state_in, state_out, out, params,
-                    (shadow_of_row, cfg.max_shadowed_per_object))
+        k = cfg.max_lights
+        state = (objs.get("slot_light"), objs.get("slot_weight"), objs.get("slot_state"),
+                 objs.get("selected"))
+        if full:
+            out = {name: np.empty((n, k) if shape == "NK" else n, dtype)
+                   for name, (dtype, shape, _) in PER_OBJECT.items()}
+            fading = np.empty(n, np.bool_)
+        else:
+            last = c.frame
+            out = {name: getattr(last, name) for name in PER_OBJECT}
+            fading = c.fading
+            if run.size:
+                out = {name: arr.copy() for name, arr in out.items()}
+                fading = fading.copy()
+        out["visible"] = vis_o
+        if run.size:
+            params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
+                               _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
+            object_pass(run, (vis_o, reset), (seg, heap), (lights.id, live), state,
+                        tuple(out[name] for name in PER_OBJECT if name != "visible")
+                        + (fading,), params, (shadow_of_row, cfg.max_shadowed_per_object))
         t = _lap(seconds, "objects", t)
 
-        for (name, _), arr in zip(_KEPT, state_out, strict=True):
-            objs.put(name, arr)
-        objs.put("slot_light", out[0])
-        objs.put("slot_state", out[4])
+        objs.put("slot_light", out["light_ids"])
+        objs.put("slot_state", out["fade_state"])
         objs.put("was_visible", vis_o)
-        self._spare_state = (state_in[1], state_in[3])  # next frame writes over these
         frame = empty_frame(
-            objs.id, k, cfg.cascades, visible=vis_o.copy(), count=out[5], candidates=out[6],
-            light_ids=out[0], light_index=out[1], priority=out[2], fade_weight=out[3],
-            fade_state=out[4], directional_lights=directional.astype(np.int32),
-            visible_lights=lights.id[vis_l], cascade_splits=splits, slot_shadow=out[7],
+            objs.id, k, cfg.cascades, **out, directional_lights=directional.astype(np.int32),
+            visible_lights=lights.id[vis_l], cascade_splits=splits,
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
             caster_offsets=casters[0], caster_ids=casters[1], caster_masks=casters[2])
         freeze(frame)
         self._shadow_prev = (lights.id[shadow_rows], shadow_tier.astype(np.int64))
-        plan["visibility"] = f"frustum planes, {len(cameras)} camera(s)"
+        self._cache = _Cache(
+            lights={f: getattr(lights, f) for f in LIGHT_FIELDS},
+            objects={f: getattr(objs, f) for f in OBJECT_FIELDS}, cam_key=key,
+            frames=frames, splits=splits, vis_l=vis_l, vis_o=vis_o, box=box, compete=compete,
+            packed=packed, grid=grid, seg=seg, heap=heap, used=used, live=live,
+            shadow_of_row=shadow_of_row, fading=fading, frame=frame, casters=kept_casters)
+        if not full:
+            plan["frame"] = (f"incremental: {lrows.size} lights and {orows.size} objects "
+                             "changed, cameras " + ("unchanged" if same_cams else "moved"))
+        plan["visibility"] = f"frustum planes, {len(frames)} camera(s)"
         plan["priority"] = cfg.model + " (exact float64)"
         if cfg.precision == "fast":
             plan["priority"] += "; precision 'fast' not built yet, ran exact"
@@ -228,89 +408,204 @@ class Scheduler(SceneAPI):
             "plan": plan,
             "counts": {
                 "objects": n,
-                "visible_objects": n_vis,
-                "lights": len(lights),
+                "visible_objects": int(np.count_nonzero(vis_o)),
+                "lights": n_l,
                 "visible_lights": int(np.count_nonzero(vis_l)),
                 "competing_lights": int(np.count_nonzero(compete)),
-                "pairs": n_pairs,
-                "pair_bound": int(offsets[-1]),
+                "pairs": int(seg[:, 1].sum()) if n else 0,
                 "slots": int(frame.count.sum()),
                 "shadow_lights": int(shadow_rows.size),
                 "casters": int(casters[1].size),
+                "recomputed_objects": int(run.size),
+                "changed_lights": n_l if full else int(lrows.size),
+                "changed_objects": n if full else int(orows.size),
                 "threads": nb.get_num_threads(),
             },
             "seconds": seconds,
         }
         return frame
 
+    # ------------------------------------------------------------------ stages
+
+    def _visible_grid(self, select: np.ndarray, box: np.ndarray,
+                      packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
+                      is_dir: np.ndarray, what: str = "vis") -> _Grid:
+        """The selected objects sorted into a grid of cells (edge CELL_PER_RADIUS x the
+        median radius of the competing point and spot lights), with their records; a single
+        cell when there are few enough pairs for brute force."""
+        objs = self.objects
+        n_sel = int(np.count_nonzero(select))
+        point_rows = np.flatnonzero(compete & ~is_dir)
+        if n_sel == 0:
+            box = np.zeros(6)
+        if point_rows.size * n_sel <= BRUTE_FORCE_PAIRS:
+            # One cell holding every selected object: each light tests them all.
+            g_f, dims = grid_shape(box[:3], box[3:],
+                                   2.0 * max(float(np.max(box[3:] - box[:3])), 1.0))
+            plan = f"brute force ({int(compete.sum())} lights x {n_sel} objects)"
+        else:
+            radii = packed[0][point_rows, 3]
+            median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
+            g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
+            plan = None
+        vis_rows, pos_of, cell_start = visible_order(objs.bounds_min, objs.bounds_max, select,
+                                                     g_f, dims)
+        nv = vis_rows.size
+        ncell = int(dims[0] * dims[1] * dims[2])
+        n_small = int(cell_start[ncell])
+        vis_box = np.empty((nv, 8))
+        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of, n_small,
+                              vis_box)
+        big_pos = np.arange(n_small, nv, dtype=np.int32)
+        if plan is None:
+            plan = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
+                    f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {big_pos.size} objects "
+                    "larger than a cell tested directly)")
+        return _Grid((g_f, dims, cell_start, ext, big_pos), (vis_box, vis_rows), plan)
+
+    def _walk(self, packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray, grid: _Grid,
+              p_params: np.ndarray, name: str) -> tuple[np.ndarray, ...]:
+        """Affects and P of the lights ``rows`` against the objects of ``grid``:
+        (rows, offsets, count, pair_obj, pair_p) in light-major segments (pairs.light_pass)."""
+        offsets = light_bounds(packed[0], rows, grid.grid, grid.vis[0].shape[0])
+        pair_obj = self._scratch(name + "_obj", int(offsets[-1]), np.int32)
+        pair_p = self._scratch(name + "_p", int(offsets[-1]), np.float64)
+        count = light_pass(packed, rows, grid.grid, grid.vis, offsets, pair_obj, pair_p,
+                           p_params)
+        return rows, offsets, count, pair_obj, pair_p
+
+    def _group(self, walked: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Light-major pairs grouped by object row: (start [N+1], pairs [H, 2] (P, light
+        row)), object o's pairs at start[o]..start[o+1]-1."""
+        rows, offsets, count, pair_obj, pair_p = walked
+        n_pairs = int(count.sum())
+        start = np.empty(n + 1, np.int64)
+        heap = np.empty((n_pairs, 2))
+        hist = self._scratch("hist", GROUP_PARTS * (n + 1), np.int64)
+        group_pairs(rows, offsets, count, pair_obj, pair_p,
+                    (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
+        return start, heap
+
+    def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
+               shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...], fresh_obj: Any,
+               fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+        """The cache's pair lists brought up to date, and the object rows to recompute.
+
+        Objects holding a pair of a walked light (found by scanning the cache) and objects
+        the walk gave pairs keep their other pairs and take the fresh ones; moved or newly
+        visible objects take their new lists; objects that left the view lose theirs."""
+        n = vis_o.size
+        flag = np.zeros(live.size, np.uint8)
+        flag[walked] |= WALKED
+        flag[(live != c.live) | (shadow_of_row != c.shadow_of_row)] |= RESELECT
+        holds = scan_pairs(c.seg, c.heap, flag) if flag.any() else np.zeros(n, np.uint8)
+        w_start, w_pairs = self._group(fresh, n)
+        rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
+        mode = np.full(n, 2, np.int8)
+        mode[fresh_rows] = 1
+        mode[left_rows] = 0
+        rows1 = np.union1d(fresh_rows, left_rows)
+        rewrite[rows1] = False
+        rows2 = np.flatnonzero(rewrite)
+        if fresh_obj is not None:
+            o_start, o_pairs = self._group(fresh_obj, n)
+        else:
+            o_start, o_pairs = np.zeros(n + 1, np.int64), np.zeros((0, 2))
+        # The cache's heap is this frame's too (records below ``used`` are not written):
+        # new lists go after them, the heap packed first when short of room or mostly
+        # garbage.
+        seg, heap, used = c.seg.copy(), c.heap, c.used
+        need = int(w_start[-1]) + int(seg[rows2, 1].sum()) + int(o_start[-1])
+        n_live = int(seg[:, 1].sum())
+        if used + need > heap.shape[0] or used > 2 * (n_live + need) + 4096:
+            seg, heap, used = compact_heap(seg, heap, need + n_live // 2 + 1024)
+        walked_flag = (flag & WALKED) != 0
+        used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag,
+                                 (w_start, w_pairs), used))
+        used = int(replace_lists(rows1, mode[rows1], (seg, heap), walked_flag,
+                                 (o_start, o_pairs), used))
+        run = (holds != 0) | rewrite | c.fading
+        run[rows1] = True
+        if cut:
+            run |= vis_o | c.vis_o
+        return seg, heap, used, np.flatnonzero(run)
 
     def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
-                 lights_packed: tuple[np.ndarray, np.ndarray], grid: tuple, vis: tuple,
-                 vis_o: np.ndarray) -> tuple[tuple[np.ndarray, ...], str]:
-        """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, and
-        the plan: directional lights scan every object against their cascade sweeps; point
-        and spot lights walk the light pass's grid of visible objects, then a grid of the
-        same kind over the invisible casting objects that meet their spheres' bounding box
-        (objects need not be visible to cast)."""
+                 lights_packed: tuple[np.ndarray, np.ndarray], grid: _Grid,
+                 vis_o: np.ndarray, recompute: np.ndarray,
+                 cached: dict[int, tuple[np.ndarray, np.ndarray]] | None
+                 ) -> tuple[tuple[np.ndarray, ...], dict[int, tuple[np.ndarray, np.ndarray]], str]:
+        """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
+        per-light lists to keep, and the plan: directional lights scan every object against
+        their cascade sweeps; point and spot lights walk the light pass's grid of visible
+        objects, then a grid of the same kind over the invisible casting objects that meet
+        their spheres' bounding box (objects need not be visible to cast). Lights with
+        ``recompute`` False take their lists from ``cached``."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
         if n_s == 0:
             empty = (np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.uint32))
-            return empty, "skipped: no shadow lights"
-        vn, vq, vm, shared = culling_volumes(lights, shadow_rows, frames, splits,
-                                     self.config.cascade_overlap)
-        lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
+            return empty, {}, "skipped: no shadow lights"
         found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
-        is_dir = lights.type[shadow_rows] == DIRECTIONAL
-        plan = []
-        sun = np.flatnonzero(is_dir)
-        if sun.size:
-            bits = sweep_casters(lo, hi, casts, objs.mask,
-                                 lights.mask[shadow_rows[sun]].astype(np.int64),
-                                 (vn[sun], vq[sun], vm[sun], shared[sun]))
-            for i, t in enumerate(sun):
-                rows = np.flatnonzero(bits[i])
-                found[t] = (rows, bits[i][rows])
-            plan.append(f"{sun.size} directional: every object against "
-                        f"{vm.shape[1]} cascade sweeps")
-        local = np.flatnonzero(~is_dir)
-        if local.size:
-            rows_l = shadow_rows[local].astype(np.int64)
-            vols = (vn[local], vq[local], vm[local], shared[local])
-            parts = [self._grid_casters(lights_packed, rows_l, grid, vis, vols)]
-            # The invisible casting objects, as a subset with its own grid over the box of
-            # the lights' spheres; a grid position maps back to its row through ``hidden``.
-            hidden = np.flatnonzero(casts & ~vis_o)
-            radius = lights.radius[rows_l]
-            reach = lights.position[rows_l]
-            r_lo = (reach - radius[:, None]).min(0)
-            r_hi = (reach + radius[:, None]).max(0)
-            near = (hi[hidden] >= r_lo).all(1) & (lo[hidden] <= r_hi).all(1)
-            hidden = hidden[near]
-            g_f, dims = grid_shape(r_lo, r_hi, CELL_PER_RADIUS * float(np.median(radius)))
-            h_lo, h_hi = lo[hidden], hi[hidden]
-            h_pos_rows, h_pos, h_start = visible_order(h_lo, h_hi, np.ones(hidden.size, bool),
-                                                       g_f, dims)
-            nh = h_pos_rows.size
-            if nh:
-                n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
-                h_box = np.empty((nh, 8))
-                ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_pos, n_small, h_box)
-                h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
-                parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
-                                                (h_box, hidden[h_pos_rows]), vols))
-            for i, t in enumerate(local):
-                rows = np.concatenate([p[0][i] for p in parts])
-                masks = np.concatenate([p[1][i] for p in parts])
-                order = np.argsort(rows, kind="stable")
-                found[t] = (rows[order], masks[order])
-            plan.append(f"{local.size} point/spot: the grid of visible objects, then a grid of "
-                        f"{nh} invisible casting objects near them")
+        for t in np.flatnonzero(~recompute):
+            found[t] = cached[int(shadow_rows[t])]  # type: ignore[index]
+        todo = np.flatnonzero(recompute)
+        plan = [f"{n_s - todo.size} kept (light, cameras and objects unchanged)"] \
+            if todo.size < n_s else []
+        if todo.size:
+            rows_t = shadow_rows[todo]
+            vn, vq, vm, shared = culling_volumes(lights, rows_t, frames, splits,
+                                                 self.config.cascade_overlap)
+            lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
+            is_dir = lights.type[rows_t] == DIRECTIONAL
+            sun = np.flatnonzero(is_dir)
+            if sun.size:
+                bits = sweep_casters(lo, hi, casts, objs.mask,
+                                     lights.mask[rows_t[sun]].astype(np.int64),
+                                     (vn[sun], vq[sun], vm[sun], shared[sun]))
+                for i, t in enumerate(sun):
+                    rows = np.flatnonzero(bits[i])
+                    found[todo[t]] = (rows, bits[i][rows])
+                plan.append(f"{sun.size} directional: every object against "
+                            f"{vm.shape[1]} cascade sweeps")
+            local = np.flatnonzero(~is_dir)
+            if local.size:
+                rows_l = rows_t[local].astype(np.int64)
+                vols = (vn[local], vq[local], vm[local], shared[local])
+                parts = [self._grid_casters(lights_packed, rows_l, grid.grid, grid.vis, vols)]
+                # The invisible casting objects near the lights' spheres, as a grid of their
+                # own (same construction as the grid of visible objects).
+                radius = lights.radius[rows_l]
+                reach = lights.position[rows_l]
+                r_lo = (reach - radius[:, None]).min(0)
+                r_hi = (reach + radius[:, None]).max(0)
+                hidden = casts & ~vis_o
+                hidden &= (hi >= r_lo).all(1) & (lo <= r_hi).all(1)
+                nh = int(hidden.sum())
+                if nh:
+                    g_f, dims = grid_shape(r_lo, r_hi,
+                                           CELL_PER_RADIUS * float(np.median(radius)))
+                    h_rows, h_pos, h_start = visible_order(lo, hi, hidden, g_f, dims)
+                    n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
+                    h_box = np.empty((nh, 8))
+                    ext = visible_objects(lo, hi, objs.mask, h_pos, n_small, h_box)
+                    h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
+                    parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
+                                                    (h_box, h_rows), vols))
+                for i, t in enumerate(local):
+                    rows = np.concatenate([p[0][i] for p in parts])
+                    masks = np.concatenate([p[1][i] for p in parts])
+                    order = np.argsort(rows, kind="stable")
+                    found[todo[t]] = (rows[order], masks[order])
+                plan.append(f"{local.size} point/spot: the grid of visible objects, then a grid "
+                            f"of {nh} invisible casting objects near them")
         counts = np.array([f[0].size for f in found], np.int64)
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32)
         masks = np.concatenate([f[1] for f in found]).astype(np.uint32)
-        return (offsets, ids, masks), "; ".join(plan)
+        keep = {int(r): f for r, f in zip(shadow_rows.tolist(), found, strict=True)}
+        return (offsets, ids, masks), keep, "; ".join(plan)
 
     def _grid_casters(self, lights_packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                       grid: tuple, recs: tuple, vols: tuple

@@ -1,0 +1,69 @@
+"""What changed since the last frame (DESIGN section 6, "dirty tracking").
+
+Takes the arrays the last frame read (a scheduler keeps references to them: stores never
+change an array in place, they copy on write) and the stores as they are now; returns the
+rows whose fields differ, bit for bit, or None when the rows themselves changed (a set_ or
+remove_ call renumbered them). Only the rows that update_ calls touched since the last
+frame (``touched`` on the stores) are compared, so a frame where a few of 100k objects
+moved compares a few rows. Cameras are compared as one key of their parameters.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .scene import Camera
+
+
+def camera_key(cameras: list[Camera]) -> np.ndarray:
+    """Every parameter of the validated cameras, in order, as one float64 array."""
+    vals: list[float] = []
+    for cam in cameras:
+        vals.append(float(cam.id))
+        vals.extend(cam.position.tolist())
+        vals.extend(cam.forward.tolist())
+        vals.extend(cam.up.tolist())
+        vals.extend((cam.fov_y, cam.aspect, cam.near, cam.far))
+        vals.extend(cam.focus.tolist())
+        vals.append(cam.height_px)
+    return np.array(vals)
+
+
+def same_key(a: np.ndarray, b: np.ndarray) -> bool:
+    """Bit-identical camera keys (0.0 and -0.0 differ: a sign can reach a result)."""
+    return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
+
+
+def _rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per row, whether the bytes of row a and row b differ."""
+    if a.shape[0] == 0:
+        return np.zeros(0, np.bool_)
+    x = np.ascontiguousarray(a).view(np.uint8).reshape(a.shape[0], -1)
+    y = np.ascontiguousarray(b).view(np.uint8).reshape(b.shape[0], -1)
+    return (x != y).any(axis=1)
+
+
+def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...]
+                 ) -> np.ndarray | None:
+    """Rows of ``store`` whose ``fields`` (the first is "id") differ from ``last`` (the
+    arrays the last frame read), ascending int64; None when the ids differ."""
+    ids = store.id
+    if ids is not last["id"]:
+        if ids.shape != last["id"].shape or not np.array_equal(ids, last["id"]):
+            return None
+        rows = None  # a set_ call with the same ids: compare every row
+    elif store.touched:
+        rows = np.unique(np.concatenate(store.touched))
+    else:
+        return np.zeros(0, np.int64)
+    n = ids.size if rows is None else rows.size
+    changed = np.zeros(n, np.bool_)
+    for f in fields[1:]:
+        a, b = last[f], getattr(store, f)
+        if a is b:
+            continue
+        changed |= _rows_differ(a, b) if rows is None else _rows_differ(a[rows], b[rows])
+    out = np.flatnonzero(changed) if rows is None else rows[changed]
+    return out.astype(np.int64)

@@ -1,0 +1,281 @@
+"""Incremental frames (DESIGN section 6): every path a frame can take (unchanged, fading
+only, lights changed, objects moved, cameras moved, a cut, structural changes) gives the
+oracle's result, and the same bits as a full frame of the fast path; the plan says which
+path ran and why."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from helpers import Twin, examples, frames_identical
+from hypothesis import given
+from hypothesis import strategies as st
+from test_equivalence import big_scene, configs
+
+import lightsched as ls
+from lightsched.scenes import city, move_lights
+
+
+class FullEveryFrame(ls.Scheduler):
+    """The fast scheduler with its incremental paths turned off: every frame is full."""
+
+    def _changes(self, c: Any, same_cams: bool) -> tuple[Any, ...]:
+        return "forced by the test", None, None, None
+
+
+def _plan(f: ls.Frame) -> str:
+    return f.stats["plan"]["frame"]
+
+
+def _moved_camera(cam: ls.Camera, dx: float) -> ls.Camera:
+    return ls.Camera(position=np.asarray(cam.position, float) + [dx, 0.0, 0.3 * dx],
+                     forward=np.asarray(cam.forward, float), up=np.asarray(cam.up, float),
+                     fov_y=cam.fov_y, aspect=cam.aspect, near=cam.near, far=cam.far,
+                     focus=cam.focus)
+
+
+def _twin(cfg: ls.Config, seed: int = 5) -> tuple[Twin, dict, dict, list[ls.Camera]]:
+    lights, objects, cams = big_scene(seed, 250, 160)
+    t = Twin(cfg)
+    t.set_lights(**lights)
+    t.set_objects(**objects)
+    return t, lights, objects, cams
+
+
+def test_unchanged_frame_shares_the_last_frames_arrays():
+    t, _, _, cams = _twin(ls.Config(max_lights=4))
+    f1, _ = t.frame(cams)
+    f2, _ = t.frame(cams)
+    assert _plan(f2).startswith("unchanged"), f2.stats["plan"]
+    assert f2.light_ids is f1.light_ids and f2.fade_weight is f1.fade_weight
+    assert f2.stats["counts"]["recomputed_objects"] == 0
+    # An update that writes the values the rows already hold changes nothing either.
+    t.update_lights(id=t.fast.lights.id[:10], position=t.fast.lights.position[:10].copy())
+    t.update_objects(id=t.fast.objects.id[:5], bounds_min=t.fast.objects.bounds_min[:5].copy())
+    f3, _ = t.frame(cams)
+    assert _plan(f3).startswith("unchanged"), f3.stats["plan"]
+
+
+def test_fading_slots_are_stepped_when_nothing_moved():
+    t, lights, _, cams = _twin(ls.Config(max_lights=2, fade_in=0.1, fade_out=0.1))
+    t.frame(cams)
+    rows = np.arange(0, 160, 4)
+    lights["position"][rows] += 3.0
+    t.update_lights(id=lights["id"][rows], position=lights["position"][rows])
+    f, _ = t.frame(cams, dt=0.03)
+    fading = int(np.any((f.fade_state == 1) | (f.fade_state == 3), axis=1).sum())
+    assert fading > 0
+    plans = []
+    # A selected light waiting for a slot fades in once another has faded out: two fade
+    # times, about 8 frames here.
+    for _ in range(11):
+        f, _ = t.frame(cams, dt=0.03)
+        plans.append(_plan(f))
+        if plans[-1].startswith("incremental"):
+            assert 0 < f.stats["counts"]["recomputed_objects"] <= fading
+    assert plans[0].startswith("incremental") and plans[-1].startswith("unchanged"), plans
+
+
+@pytest.mark.parametrize("field", ["position", "intensity", "mask", "type", "radius",
+                                   "priority", "shadows", "direction"])
+def test_changed_lights_recompute_only_the_objects_they_touch(field):
+    cfg = ls.Config(max_lights=3, directional_in_slots=field == "type",
+                    unshadowed="skip" if field == "shadows" else "light", shadow_budget=3)
+    t, lights, _, cams = _twin(cfg)
+    rng = np.random.default_rng(1)
+    t.frame(cams)
+    for i in range(3):
+        rows = rng.choice(160, 12, replace=False)
+        vals = {"position": lights["position"][rows] + rng.normal(0, 2, (12, 3)),
+                "intensity": rng.choice([0.0, 3.0, 40.0], 12),
+                "mask": rng.choice([1, 2, 0xFFFFFFFF], 12),
+                "type": rng.choice([0, 1, 2], 12),
+                "radius": rng.uniform(0.5, 25.0, 12),
+                "priority": rng.choice([0.0, 7.0], 12),
+                "shadows": rng.uniform(size=12) < 0.5,
+                "direction": rng.normal(size=(12, 3))}[field]
+        lights[field][rows] = vals
+        t.update_lights(id=lights["id"][rows], **{field: vals})
+        f, _ = t.frame(cams, dt=0.05)
+        assert _plan(f).startswith("incremental"), f.stats["plan"]
+        assert f.stats["counts"]["changed_lights"] <= 12
+        assert f.stats["counts"]["recomputed_objects"] < f.stats["counts"]["visible_objects"] \
+            or i == 0 and field == "type", f.stats["counts"]
+
+
+def test_moved_objects_get_new_pairs_against_every_light():
+    t, _, objects, cams = _twin(ls.Config(max_lights=4, shadow_budget=4))
+    t.frame(cams)
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        rows = rng.choice(250, 15, replace=False)
+        d = rng.normal(0, 3, (15, 3))
+        objects["bounds_min"][rows] += d
+        objects["bounds_max"][rows] += d
+        t.update_objects(id=objects["id"][rows], bounds_min=objects["bounds_min"][rows],
+                         bounds_max=objects["bounds_max"][rows])
+        f, _ = t.frame(cams, dt=0.05)
+        assert _plan(f).startswith("incremental"), f.stats["plan"]
+        assert "15 moved or newly visible objects" in f.stats["plan"]["pairs"] or \
+            "moved or newly visible" in f.stats["plan"]["pairs"]
+    # casts_shadows alone changes casters, not pairs.
+    rows = rng.choice(250, 20, replace=False)
+    t.update_objects(id=objects["id"][rows], casts_shadows=np.zeros(20, bool))
+    f, _ = t.frame(cams, dt=0.05)
+    assert not _plan(f).startswith("unchanged"), f.stats["plan"]
+
+
+@pytest.mark.parametrize("model", ["contribution", "thesis"])
+def test_camera_moves(model):
+    t, _, _, cams = _twin(ls.Config(max_lights=4, model=model, shadow_budget=2))
+    t.frame(cams)
+    for i in range(1, 5):
+        cam = _moved_camera(cams[0], 4.0 * i)
+        f, _ = t.frame([cam], dt=0.05)
+        if model == "thesis":
+            assert _plan(f).startswith("full: the cameras moved"), f.stats["plan"]
+        else:
+            assert _plan(f).startswith("incremental"), f.stats["plan"]
+            assert "cameras moved" in _plan(f)
+
+
+def test_lights_and_objects_cross_the_edge_of_the_view():
+    """A narrow camera swinging across the scene: objects and lights enter and leave."""
+    t, lights, _, cams = _twin(ls.Config(max_lights=3, fade_in=0.05, fade_out=0.05))
+    for i in range(8):
+        a = -0.6 + 0.15 * i
+        cam = ls.Camera(position=np.array([0.0, 0.0, -20.0]),
+                        forward=np.array([math.sin(a), 0.0, math.cos(a)]),
+                        up=np.array([0.0, 1.0, 0.0]), fov_y=0.6, aspect=1.0, near=0.5,
+                        far=120.0)
+        if i % 3 == 2:
+            lights["position"][:20] += 0.7
+            t.update_lights(id=lights["id"][:20], position=lights["position"][:20])
+        f, _ = t.frame([cam], dt=0.02)
+        if i:
+            assert _plan(f).startswith("incremental"), f.stats["plan"]
+
+
+def test_a_cut_restarts_the_fades_without_recomputing_pairs():
+    t, lights, _, cams = _twin(ls.Config(max_lights=2))
+    t.frame(cams)
+    lights["position"][::5] += 2.0
+    t.update_lights(id=lights["id"][::5], position=lights["position"][::5])
+    t.frame(cams)
+    f, _ = t.frame(cams, cut=True)
+    assert _plan(f).startswith("incremental"), f.stats["plan"]
+    assert f.stats["counts"]["recomputed_objects"] == f.stats["counts"]["visible_objects"]
+    assert not np.any(f.fade_state == 1) and not np.any(f.fade_state == 3)
+
+
+def test_structural_changes_run_full_frames():
+    t, lights, objects, cams = _twin(ls.Config(max_lights=3))
+    t.frame(cams)
+    t.remove_lights(id=lights["id"][:3])
+    f, _ = t.frame(cams)
+    assert _plan(f) == "full: the light set changed (set_lights or remove_lights)"
+    t.remove_objects(id=objects["id"][:3])
+    f, _ = t.frame(cams)
+    assert _plan(f) == "full: the object set changed (set_objects or remove_objects)"
+    # set_ with the very same ids keeps the rows: only the rows that differ count.
+    keep = {k: v[3:] for k, v in lights.items()}
+    keep["intensity"] = keep["intensity"].copy()
+    keep["intensity"][:4] += 1.0
+    t.set_lights(**keep)
+    f, _ = t.frame(cams)
+    assert _plan(f).startswith("incremental: 4 lights"), f.stats["plan"]
+
+
+# --------------------------------------------------------------------------- mixed runs
+
+OPS = ["none", "none", "lights", "objects", "camera", "props", "cut"]
+
+
+def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict,
+          cams: list[ls.Camera]) -> tuple[list[ls.Camera], bool]:
+    """One random change of kind ``op`` applied to ``t`` (a Twin or a pair of schedulers)."""
+    n_l, n_o = lights["id"].size, objects["id"].size
+    cut = False
+    if op == "lights":
+        rows = rng.choice(n_l, max(1, n_l // 10), replace=False)
+        lights["position"][rows] += rng.normal(0, 1.5, (rows.size, 3))
+        t.update_lights(id=lights["id"][rows], position=lights["position"][rows])
+    elif op == "objects":
+        rows = rng.choice(n_o, max(1, n_o // 20), replace=False)
+        d = rng.normal(0, 1.5, (rows.size, 3))
+        objects["bounds_min"][rows] += d
+        objects["bounds_max"][rows] += d
+        t.update_objects(id=objects["id"][rows], bounds_min=objects["bounds_min"][rows],
+                         bounds_max=objects["bounds_max"][rows])
+    elif op == "camera":
+        cams = [_moved_camera(cams[0], float(rng.normal(0, 2.0)))]
+    elif op == "props":
+        rows = rng.choice(n_l, max(1, n_l // 20), replace=False)
+        lights["intensity"][rows] = rng.choice([0.0, 2.0, 30.0], rows.size)
+        lights["shadows"][rows] = rng.uniform(size=rows.size) < 0.5
+        t.update_lights(id=lights["id"][rows], intensity=lights["intensity"][rows],
+                        shadows=lights["shadows"][rows])
+    elif op == "cut":
+        cut = True
+    return cams, cut
+
+
+@examples(0.25)
+@given(seed=st.integers(0, 2**32 - 1), cfg=configs(),
+       ops=st.lists(st.sampled_from(OPS), min_size=3, max_size=9))
+def test_mixed_sequence_matches_oracle(seed, cfg, ops):
+    lights, objects, cams = big_scene(seed, 200, 120)
+    t = Twin(cfg)
+    t.set_lights(**lights)
+    t.set_objects(**objects)
+    rng = np.random.default_rng(seed)
+    t.frame(cams)
+    for op in ops:
+        cams, cut = _step(rng, op, t, lights, objects, cams)
+        t.frame(cams, dt=float(rng.choice([0.0, 1 / 60, 0.1])), cut=cut)
+
+
+class _Pair:
+    """Two fast schedulers, incremental and full every frame, driven alike."""
+
+    def __init__(self, cfg: ls.Config) -> None:
+        self.a, self.b = ls.Scheduler(cfg), FullEveryFrame(cfg)
+
+    def __getattr__(self, name: str) -> Any:
+        def call(**kw: Any) -> None:
+            getattr(self.a, name)(**kw)
+            getattr(self.b, name)(**kw)
+        return call
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_incremental_city_is_bit_identical_to_full_frames(seed):
+    scene = city(20_000, 2_000, seed=seed, shadow_fraction=0.02, sun_shadows=True)
+    cfg = ls.Config(max_lights=8, fade_in=0.1, fade_out=0.1, shadow_budget=4)
+    p = _Pair(cfg)
+    p.set_lights(**scene.lights)
+    p.set_objects(**scene.objects)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
+    cams = list(scene.cameras)
+    rng = np.random.default_rng(seed)
+    seen = set()
+    ops = ["none", "lights", "lights", "none", "objects", "camera", "props", "none", "cut",
+           "lights"] + ["none"] * 5
+    for i, op in enumerate(ops):
+        if op == "lights":
+            sub = rng.choice(2_000, 200, replace=False)
+            pos = move_lights({k: v[sub] for k, v in lights.items()}, i)
+            lights["position"][sub] = pos
+            p.update_lights(id=lights["id"][sub], position=pos)
+            cut = False
+        else:
+            cams, cut = _step(rng, op, p, lights, objects, cams)
+        fa = p.a.frame(cams, dt=1 / 30, cut=cut)
+        fb = p.b.frame(cams, dt=1 / 30, cut=cut)
+        seen.add(_plan(fa).split(":")[0])
+        frames_identical(fa, fb, f"frame {i} ({op}, {_plan(fa)})")
+    assert seen == {"full", "incremental", "unchanged"}, seen
