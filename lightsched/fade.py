@@ -57,6 +57,24 @@ def _put(sf, si, cnt, lid, w, st, p, row):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def steady_slots(sf, si, nsel):
+    """Slots that are all on: the selection (F_P, I_ID, I_ROW)[:nsel] at weight 1, in
+    output order (P descending, ties to the lower id), written to the new-slot rows.
+    This is step 3 (an object that starts with its selected lights on), and what steps
+    1-2 give an object whose slots were all on and hold exactly its selection (the object
+    pass of pairs.py checks that and skips the rest of the machine). Each light's place is
+    the number of lights that rank before it: compares only, no branch on the data (an
+    insertion sort mispredicts about once per light on random priorities)."""
+    for i in range(nsel):
+        p = sf[F_P, i]
+        lid = si[I_ID, i]
+        pos = 0
+        for j in range(nsel):
+            pos += (sf[F_P, j] > p) | ((sf[F_P, j] == p) & (si[I_ID, j] < lid))
+        _put(sf, si, pos, lid, 1.0, ON, p, si[I_ROW, i])
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
     """Selected set in rows (I_ID, F_P, I_ROW)[:nsel]; last frame's slots in (I_OLD_ID,
     F_OLD_W, I_OLD_ST) with this frame's (F_OLD_P, I_OLD_ROW); writes the new slots to
@@ -66,61 +84,59 @@ def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
     cnt = 0
     if reset:
         # Step 3: new, just visible, first frame or a cut: only visible changes fade.
+        steady_slots(sf, si, nsel)
+        return nsel
+    for t in range(nsel):
+        si[I_HAS_SLOT, t] = 0
+        si[I_TAKEN, t] = 0
+    # Step 1: occupied slots.
+    for m in range(k):
+        lid = si[I_OLD_ID, m]
+        if lid < 0:
+            break
+        if si[I_OLD_ROW, m] < 0:
+            continue  # no longer affects: freed at once, it shows nothing anyway
+        chosen = -1
+        for t in range(nsel):  # compares only: it vectorises, a break would not
+            chosen = t if si[I_ID, t] == lid else chosen
+        w = sf[F_OLD_W, m]
+        st = si[I_OLD_ST, m]
+        if chosen >= 0:
+            si[I_HAS_SLOT, chosen] = 1
+            if st != ON:
+                st = FADING_IN
+                w = 1.0 if fade_in == 0.0 else w + inc
+                if w >= 1.0 - ONE_EPS:
+                    w = 1.0
+                    st = ON
+        else:
+            if fade_out == 0.0:
+                continue
+            w = w - dec
+            if w <= ONE_EPS:
+                continue
+            st = FADING_OUT
+        _put(sf, si, cnt, lid, w, st, sf[F_OLD_P, m], si[I_OLD_ROW, m])
+        cnt += 1
+    # Step 2: slotless selected lights take free slots, highest P first.
+    while cnt < k:
+        best = -1
         for t in range(nsel):
-            _put(sf, si, cnt, si[I_ID, t], 1.0, ON, sf[F_P, t], si[I_ROW, t])
-            cnt += 1
-    else:
-        for t in range(nsel):
-            si[I_HAS_SLOT, t] = 0
-            si[I_TAKEN, t] = 0
-        # Step 1: occupied slots.
-        for m in range(k):
-            lid = si[I_OLD_ID, m]
-            if lid < 0:
-                break
-            if si[I_OLD_ROW, m] < 0:
-                continue  # no longer affects: freed at once, it shows nothing anyway
-            chosen = -1
-            for t in range(nsel):  # compares only: it vectorises, a break would not
-                chosen = t if si[I_ID, t] == lid else chosen
-            w = sf[F_OLD_W, m]
-            st = si[I_OLD_ST, m]
-            if chosen >= 0:
-                si[I_HAS_SLOT, chosen] = 1
-                if st != ON:
-                    st = FADING_IN
-                    w = 1.0 if fade_in == 0.0 else w + inc
-                    if w >= 1.0 - ONE_EPS:
-                        w = 1.0
-                        st = ON
-            else:
-                if fade_out == 0.0:
-                    continue
-                w = w - dec
-                if w <= ONE_EPS:
-                    continue
-                st = FADING_OUT
-            _put(sf, si, cnt, lid, w, st, sf[F_OLD_P, m], si[I_OLD_ROW, m])
-            cnt += 1
-        # Step 2: slotless selected lights take free slots, highest P first.
-        while cnt < k:
-            best = -1
-            for t in range(nsel):
-                if si[I_HAS_SLOT, t] != 0 or si[I_TAKEN, t] != 0:
-                    continue
-                if best < 0 or ranks_before(sf[F_P, t], si[I_ID, t], sf[F_P, best],
-                                            si[I_ID, best]):
-                    best = t
-            if best < 0:
-                break
-            si[I_TAKEN, best] = 1
-            w = 1.0 if fade_in == 0.0 else min(1.0, inc)
-            st = FADING_IN
-            if w >= 1.0 - ONE_EPS:
-                w = 1.0
-                st = ON
-            _put(sf, si, cnt, si[I_ID, best], w, st, sf[F_P, best], si[I_ROW, best])
-            cnt += 1
+            if si[I_HAS_SLOT, t] != 0 or si[I_TAKEN, t] != 0:
+                continue
+            if best < 0 or ranks_before(sf[F_P, t], si[I_ID, t], sf[F_P, best],
+                                        si[I_ID, best]):
+                best = t
+        if best < 0:
+            break
+        si[I_TAKEN, best] = 1
+        w = 1.0 if fade_in == 0.0 else min(1.0, inc)
+        st = FADING_IN
+        if w >= 1.0 - ONE_EPS:
+            w = 1.0
+            st = ON
+        _put(sf, si, cnt, si[I_ID, best], w, st, sf[F_P, best], si[I_ROW, best])
+        cnt += 1
     # Insertion sort into output order (at most K entries).
     for i in range(1, cnt):
         lid = si[I_NEW_ID, i]

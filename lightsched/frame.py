@@ -139,12 +139,12 @@ def changed_rows(prev: Frame, cur: Frame, names: tuple[str, ...]) -> np.ndarray:
         prev_row = np.where(kept, pos_c, -1)
     changed = np.zeros(n, np.bool_)
     for name in names:
-        a, b = _row_words(getattr(cur, name)), _row_words(getattr(prev, name))
+        a, b = row_words(getattr(cur, name)), row_words(getattr(prev, name))
         _rows_differ(a, b, prev_row, changed)
     return changed
 
 
-def _row_words(a: np.ndarray) -> np.ndarray:
+def row_words(a: np.ndarray) -> np.ndarray:
     """Rows as the widest words that tile them (bitwise: a row "differs" when its bytes
     do), so a row of 8 int32 is compared as 4 int64."""
     rows = np.ascontiguousarray(a).reshape(a.shape[0], -1).view(np.uint8)

@@ -32,7 +32,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .fade import fade_object
+from .fade import fade_object, steady_slots
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
 from .scene import DIRECTIONAL, ON, SPOT
 from .select import (
@@ -616,6 +616,10 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
     int8, fading bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in,
     dt/fade_out, fade_in, fade_out); shadow = (shadow map index per light row or -1,
     max_shadowed_per_object).
+
+    Most objects of a scene in motion are steady: last frame's slots are all on and hold
+    exactly this frame's selection, so only P changes. They skip the fade machine (its
+    result is fade.steady_slots) and read only last frame's ids and states.
     """
     visible, reset = objs
     seg, heap = lists
@@ -642,16 +646,18 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
             nbest = 0
             cand = 0
             if visible[o]:
-                for m in range(k):
-                    si[I_OLD_ID, m] = s_id[o, m]
-                    sf[F_OLD_W, m] = s_w[o, m]
-                    si[I_OLD_ST, m] = s_st[o, m]
-                    si[I_PREV_SEL, m] = s_sel[o, m]
-                    si[I_OLD_ROW, m] = -1
                 a = seg[o, 0]
                 b = a + seg[o, 1]
                 for t in range(a, b):
                     cand += live[np.int64(heap[t, 1])]
+                n_old = 0
+                all_on = True
+                for m in range(k):
+                    lid = s_id[o, m]
+                    si[I_OLD_ID, m] = lid
+                    si[I_OLD_ROW, m] = -1
+                    n_old += lid >= 0
+                    all_on &= (lid < 0) | (s_st[o, m] == ON)
                 if cand <= k:
                     # Every competing light is selected: no keys, no ranking to keep.
                     for t in range(a, b):
@@ -666,11 +672,31 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
                         si[I_ROW, nbest] = j
                         nbest += 1
                 else:
+                    for m in range(k):
+                        si[I_PREV_SEL, m] = s_sel[o, m]
                     for t in range(a, b):
                         j = np.int64(heap[t, 1])
                         if live[j]:
                             nbest = _select(heap[t, 0], j, ids, sf, si, nbest, h, h_abs)
-                cnt = fade_object(sf, si, nbest, reset[o], inc, dec, fade_in, fade_out)
+                steady = reset[o]
+                if not steady and all_on and n_old == nbest:
+                    # Steady when every old slot holds a selected light (filled slots come
+                    # first; ids are unique, so counting them is a set comparison).
+                    matched = 0
+                    for m in range(n_old):
+                        hit = False
+                        for t in range(nbest):
+                            hit |= si[I_ID, t] == si[I_OLD_ID, m]
+                        matched += hit
+                    steady = matched == nbest
+                if steady:
+                    steady_slots(sf, si, nbest)
+                    cnt = nbest
+                else:
+                    for m in range(k):
+                        sf[F_OLD_W, m] = s_w[o, m]
+                        si[I_OLD_ST, m] = s_st[o, m]
+                    cnt = fade_object(sf, si, nbest, False, inc, dec, fade_in, fade_out)
             fading = False
             for m in range(k):
                 if m < cnt:
@@ -694,7 +720,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
             o_count[o] = cnt
             o_cand[o] = cand
             o_fading[o] = fading
-            if any_shadow:
+            if any_shadow and cnt:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
 
 

@@ -62,12 +62,15 @@ def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask,
 
 
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
-                c1: float) -> tuple[np.ndarray, np.ndarray]:
-    """Packs the light store into the row layout above (one cache-friendly row per light)."""
+                c1: float, camera_term: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Packs the light store into the row layout above (one cache-friendly row per light).
+    Without ``camera_term`` (the contribution model, which does not read it) light_f
+    column 7 is -inf: the eccentricity is the packing's costliest part."""
+    cams = slice(None) if camera_term else slice(0)
     return _pack(lights.type, lights.position, lights.radius, lights.direction,
                  lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
-                 lights.mask, lights.id, frames.position, frames.basis, frames.tan_xy,
-                 frames.focus, np.array([w_ecc, w_dist, c1]))
+                 lights.mask, lights.id, frames.position[cams], frames.basis[cams],
+                 frames.tan_xy[cams], frames.focus[cams], np.array([w_ecc, w_dist, c1]))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

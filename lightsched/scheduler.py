@@ -19,7 +19,9 @@ A full frame computes every pair; an incremental one keeps the last frame's pair
   shadow map or "skip" status changed, and on the objects still fading; the other rows of
   the outputs are the last frame's (shared outright when no row changed).
 Results equal a full frame's: an object whose pairs, slots and shadow maps did not change
-gets the same row again (selection with hysteresis is a fixed point of unchanged P).
+gets the same row again (selection with hysteresis is a fixed point of unchanged P). The
+shadow ranking is redone every frame but an unchanged one: its order is a fixed point only
+once the shadowed set has stayed the same for a frame (see _Cache.shadows_settled).
 
 The per-object state (slots, weights, last frame's selection) lives in the object store's
 ``state`` so it follows ids through set_/remove_ calls; the slot ids and states are the
@@ -114,6 +116,10 @@ class _Cache:
     live: np.ndarray
     shadow_of_row: np.ndarray
     fading: np.ndarray         # per object: a slot is fading in or out
+    # The shadowed set equals the one before it. Then the next frame's ranking gives the
+    # same order; after a change it may not: a light that just joined ranks with the
+    # hysteresis bonus one frame later (the set itself is a fixed point, its order is not).
+    shadows_settled: bool
     frame: Frame
     casters: dict[int, tuple[np.ndarray, np.ndarray]]   # light row -> (object rows, masks)
 
@@ -163,20 +169,19 @@ class Scheduler(SceneAPI):
         if why is None:
             assert c is not None
             if (lrows.size == 0 and orows.size == 0 and orows_cast.size == 0 and same_cams
-                    and not cut and not c.fading.any()):
+                    and not cut and c.shadows_settled and not c.fading.any()):
                 return self._unchanged(c, seconds, t)
-            frame = self._step(c, frames, splits, key, same_cams, lrows, orows, orows_cast,
-                               dt, cut, seconds, plan, t)
-        else:
-            frame = self._step(None, frames, splits, key, False, None, None, None, dt, cut,
-                               seconds, plan, t)
+        frame = self._step(c, why is not None, frames, splits, key, same_cams, lrows, orows,
+                           orows_cast, dt, cut, seconds, plan, t)
+        if why is not None:
             plan["frame"] = "full: " + why
         return frame
 
     def _changes(self, c: _Cache | None, same_cams: bool
                  ) -> tuple[str | None, Any, Any, Any]:
         """(why the frame must be full, or None; changed light rows; object rows whose
-        pairs change; object rows whose casts_shadows changed)."""
+        pairs change; object rows whose casts_shadows changed). The rows are None when the
+        rows themselves changed (set_/remove_ with other ids)."""
         if c is None:
             return "first frame", None, None, None
         cfg = self.config
@@ -187,13 +192,14 @@ class Scheduler(SceneAPI):
         if orows is None:
             return "the object set changed (set_objects or remove_objects)", None, None, None
         orows_cast = changed_rows(c.objects, self.objects, ("id", "casts_shadows"))
+        why = None
         if not same_cams and cfg.model == "thesis":
-            return "the cameras moved (thesis priorities depend on them)", None, None, None
-        if lrows.size > FULL_SHARE * max(len(self.lights), 1):
-            return f"{lrows.size} of {len(self.lights)} lights changed", None, None, None
-        if orows.size > FULL_SHARE * max(len(self.objects), 1):
-            return f"{orows.size} of {len(self.objects)} objects changed", None, None, None
-        return None, lrows, orows, orows_cast
+            why = "the cameras moved (thesis priorities depend on them)"
+        elif lrows.size > FULL_SHARE * max(len(self.lights), 1):
+            why = f"{lrows.size} of {len(self.lights)} lights changed"
+        elif orows.size > FULL_SHARE * max(len(self.objects), 1):
+            why = f"{orows.size} of {len(self.objects)} objects changed"
+        return why, lrows, orows, orows_cast
 
     def _unchanged(self, c: _Cache, seconds: dict[str, float], t: float) -> Frame:
         """Nothing moved, nothing fades, no cut: the last frame's arrays are this frame's
@@ -213,17 +219,17 @@ class Scheduler(SceneAPI):
         }
         return frame
 
-    def _step(self, c: _Cache | None, frames: CameraFrames, splits: np.ndarray,
+    def _step(self, c: _Cache | None, full: bool, frames: CameraFrames, splits: np.ndarray,
               key: np.ndarray, same_cams: bool, lrows: Any, orows: Any, orows_cast: Any,
               dt: float, cut: bool, seconds: dict[str, float], plan: dict[str, str],
               t: float) -> Frame:
-        """One frame: in full when ``c`` is None, else incrementally from the cache ``c``
-        with the changed light rows ``lrows`` and object rows ``orows`` (pairs) and
-        ``orows_cast`` (casts_shadows)."""
+        """One frame: in ``full``, or incrementally from the last frame's cache ``c`` with
+        the changed light rows ``lrows`` and object rows ``orows`` (pairs) and
+        ``orows_cast`` (casts_shadows). A full frame with a cache (many lights changed)
+        still keeps the caster lists of the shadowed lights that did not change."""
         cfg = self.config
         lights, objs = self.lights, self.objects
         n, n_l = len(objs), len(lights)
-        full = c is None
 
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
@@ -236,7 +242,8 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "visibility", t)
 
         if full or lrows.size or (not same_cams and cfg.model != "contribution"):
-            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1)
+            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
+                                 cfg.model == "thesis")
         else:
             packed = c.packed
         is_dir = lights.type == DIRECTIONAL
@@ -317,7 +324,8 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "shadows", t)
 
         recompute = np.ones(shadow_rows.size, np.bool_)
-        if not full and same_cams and orows.size == 0 and orows_cast.size == 0:
+        if c is not None and lrows is not None and same_cams and orows.size == 0 \
+                and orows_cast.size == 0:
             # Casters depend on the light, the cameras and every object: a light none of
             # them changed for keeps its list.
             changed_l = np.zeros(n_l, np.bool_)
@@ -326,7 +334,7 @@ class Scheduler(SceneAPI):
                                   for r in shadow_rows.tolist()], np.bool_)
         casters, kept_casters, plan["casters"] = self._casters(
             frames, splits, shadow_rows, packed, grid, vis_o, recompute,
-            None if full else c.casters)
+            None if c is None else c.casters)
         t = _lap(seconds, "casters", t)
 
         # The pair cache: built from this frame's pairs, or the changed lists rewritten.
@@ -383,16 +391,25 @@ class Scheduler(SceneAPI):
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
             caster_offsets=casters[0], caster_ids=casters[1], caster_masks=casters[2])
         freeze(frame)
+        settled = np.array_equal(np.sort(self._shadow_prev[0]), np.sort(lights.id[shadow_rows]))
         self._shadow_prev = (lights.id[shadow_rows], shadow_tier.astype(np.int64))
         self._cache = _Cache(
             lights={f: getattr(lights, f) for f in LIGHT_FIELDS},
             objects={f: getattr(objs, f) for f in OBJECT_FIELDS}, cam_key=key,
             frames=frames, splits=splits, vis_l=vis_l, vis_o=vis_o, box=box, compete=compete,
             packed=packed, grid=grid, seg=seg, heap=heap, used=used, live=live,
-            shadow_of_row=shadow_of_row, fading=fading, frame=frame, casters=kept_casters)
+            shadow_of_row=shadow_of_row, fading=fading, shadows_settled=settled, frame=frame,
+            casters=kept_casters)
         if not full:
-            plan["frame"] = (f"incremental: {lrows.size} lights and {orows.size} objects "
-                             "changed, cameras " + ("unchanged" if same_cams else "moved"))
+            why = [f"{lrows.size} lights and {orows.size} objects changed",
+                   "cameras " + ("unchanged" if same_cams else "moved")]
+            if c.fading.any():
+                why.append(f"{int(c.fading.sum())} objects fading")
+            if not c.shadows_settled:
+                why.append("the shadowed set changed last frame")
+            if cut:
+                why.append("a cut")
+            plan["frame"] = "incremental: " + ", ".join(why)
         plan["visibility"] = f"frustum planes, {len(frames)} camera(s)"
         plan["priority"] = cfg.model + " (exact float64)"
         if cfg.precision == "fast":
@@ -417,8 +434,8 @@ class Scheduler(SceneAPI):
                 "shadow_lights": int(shadow_rows.size),
                 "casters": int(casters[1].size),
                 "recomputed_objects": int(run.size),
-                "changed_lights": n_l if full else int(lrows.size),
-                "changed_objects": n if full else int(orows.size),
+                "changed_lights": n_l if lrows is None else int(lrows.size),
+                "changed_objects": n if orows is None else int(orows.size),
                 "threads": nb.get_num_threads(),
             },
             "seconds": seconds,
@@ -580,19 +597,22 @@ class Scheduler(SceneAPI):
                 reach = lights.position[rows_l]
                 r_lo = (reach - radius[:, None]).min(0)
                 r_hi = (reach + radius[:, None]).max(0)
-                hidden = casts & ~vis_o
-                hidden &= (hi >= r_lo).all(1) & (lo <= r_hi).all(1)
-                nh = int(hidden.sum())
+                hidden = np.flatnonzero(casts & ~vis_o)
+                near = (hi[hidden] >= r_lo).all(1) & (lo[hidden] <= r_hi).all(1)
+                hidden = hidden[near]
+                nh = hidden.size
                 if nh:
                     g_f, dims = grid_shape(r_lo, r_hi,
                                            CELL_PER_RADIUS * float(np.median(radius)))
-                    h_rows, h_pos, h_start = visible_order(lo, hi, hidden, g_f, dims)
+                    h_lo, h_hi = lo[hidden], hi[hidden]
+                    h_rows, h_pos, h_start = visible_order(h_lo, h_hi, np.ones(nh, np.bool_),
+                                                           g_f, dims)
                     n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
                     h_box = np.empty((nh, 8))
-                    ext = visible_objects(lo, hi, objs.mask, h_pos, n_small, h_box)
+                    ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_pos, n_small, h_box)
                     h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
                     parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
-                                                    (h_box, h_rows), vols))
+                                                    (h_box, hidden[h_rows]), vols))
                 for i, t in enumerate(local):
                     rows = np.concatenate([p[0][i] for p in parts])
                     masks = np.concatenate([p[1][i] for p in parts])
