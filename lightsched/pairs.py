@@ -547,10 +547,10 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
     its own histogram (parallel); within an object the runs follow each other, so the
     order of its lights is the order of ``rows`` whatever the thread count. out = (hist
-    [GROUP_PARTS, N+1] int64 scratch, start [N+1], obj_pairs [H, 2]), reused buffers; fills
-    start and obj_pairs = (P, light row) per pair: one record, one cache line touched per
+    [GROUP_PARTS, N+1] int64 scratch, start [N+1], (P float64 [H], light row int32 [H])),
+    reused buffers; fills start and the pairs (P, light row): one position, two stores per
     scattered pair."""
-    hist, start, obj_pairs = out
+    hist, start, (pair_p_out, pair_j_out) = out
     n_l = rows.shape[0]
     n_obj = start.shape[0] - 1
     for q in nb.prange(GROUP_PARTS):
@@ -572,8 +572,8 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
             for e in range(offsets[t], offsets[t] + count[t]):
                 o = pair_obj[e]
                 d = hist[q, o]
-                obj_pairs[d, 0] = pair_p[e]
-                obj_pairs[d, 1] = j
+                pair_p_out[d] = pair_p[e]
+                pair_j_out[d] = j
                 hist[q, o] = d + 1
 
 
@@ -606,15 +606,15 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
     copied them from the last frame).
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
-    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in heap,
-    heap [H, 2] (P, light row)): the pair cache; lights = (light id by row, live by row:
-    visible, and not removed by unshadowed = "skip"; pairs of other lights are kept in the
-    cache but do not compete); state = (slot ids, slot weights f64, slot states, selected
-    ids), each [N, K]: the ids and states are last frame's light_ids and fade_state
-    outputs, the weights and selection are updated in place; out = (light_ids,
-    light_index, priority f32, fade_weight f32, fade_state, count, candidates, slot_shadow
-    int8, fading bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in,
-    dt/fade_out, fade_in, fade_out); shadow = (shadow map index per light row or -1,
+    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the heap,
+    heap = (P float64 [H], light row int32 [H])): the pair cache; lights = (light id by row,
+    live by row: visible, and not removed by unshadowed = "skip"; pairs of other lights are
+    kept in the cache but do not compete); state = (slot ids, slot weights f64, slot states,
+    selected ids), each [N, K]: the ids and states are last frame's light_ids and fade_state
+    outputs, the weights and selection are updated in place; out = (light_ids, light_index,
+    priority f32, fade_weight f32, fade_state, count, candidates, slot_shadow int8, fading
+    bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in, dt/fade_out,
+    fade_in, fade_out); shadow = (shadow map index per light row or -1,
     max_shadowed_per_object).
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
@@ -622,7 +622,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
     result is fade.steady_slots) and read only last frame's ids and states.
     """
     visible, reset = objs
-    seg, heap = lists
+    seg, (heap_p, heap_j) = lists
     ids, live = lights
     s_id, s_w, s_st, s_sel = state
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow, o_fading = out
@@ -649,7 +649,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
                 a = seg[o, 0]
                 b = a + seg[o, 1]
                 for t in range(a, b):
-                    cand += live[np.int64(heap[t, 1])]
+                    cand += live[heap_j[t]]
                 n_old = 0
                 all_on = True
                 for m in range(k):
@@ -661,10 +661,10 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
                 if cand <= k:
                     # Every competing light is selected: no keys, no ranking to keep.
                     for t in range(a, b):
-                        j = np.int64(heap[t, 1])
+                        j = np.int64(heap_j[t])
                         if not live[j]:
                             continue
-                        p = heap[t, 0]
+                        p = heap_p[t]
                         lid = np.int64(ids[j])
                         _match_old_slot(p, j, lid, sf, si)
                         sf[F_P, nbest] = p
@@ -675,9 +675,9 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
                     for m in range(k):
                         si[I_PREV_SEL, m] = s_sel[o, m]
                     for t in range(a, b):
-                        j = np.int64(heap[t, 1])
+                        j = np.int64(heap_j[t])
                         if live[j]:
-                            nbest = _select(heap[t, 0], j, ids, sf, si, nbest, h, h_abs)
+                            nbest = _select(heap_p[t], j, ids, sf, si, nbest, h, h_abs)
                 steady = reset[o]
                 if not steady and all_on and n_old == nbest:
                     # Steady when every old slot holds a selected light (filled slots come
@@ -727,13 +727,14 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
 # --------------------------------------------------------------------------- pair cache
 #
 # The pairs of a frame are kept for the next one (DESIGN section 6): per object row a
-# segment (start, length) of a heap of (P, light row) records. An incremental frame
+# segment (start, length) of a heap of (P, light row) pairs, kept as two arrays (P float64,
+# light row int32) so a scan of the light rows reads a quarter of it. An incremental frame
 # rewrites only the segments of objects whose pairs changed, appending them to the heap;
 # the segments it no longer points to are garbage until the heap is compacted.
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def scan_pairs(seg, heap, light_flag):
+def scan_pairs(seg, heap_j, light_flag):
     """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
     so an incremental frame finds the objects that hold a pair of a changed light."""
     n = seg.shape[0]
@@ -743,21 +744,24 @@ def scan_pairs(seg, heap, light_flag):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
             acc = 0
             for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                acc |= light_flag[np.int64(heap[t, 1])]
+                acc |= light_flag[heap_j[t]]
             out[o] = acc
     return out
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def compact_heap(seg, heap, spare):
-    """The live segments of the heap packed into a new heap with ``spare`` free records
-    after them; returns (new seg, new heap, records used). Segment order is row order."""
+    """The live segments of the heap (P, light row) packed into a new heap with ``spare``
+    free records after them; returns (new seg, new heap, records used). Segment order is
+    row order."""
     n = seg.shape[0]
     start = np.zeros(n + 1, np.int64)
     for o in range(n):
         start[o + 1] = start[o] + seg[o, 1]
     used = start[n]
-    new_heap = np.empty((used + spare, 2))
+    heap_p, heap_j = heap
+    new_p = np.empty(used + spare)
+    new_j = np.empty(used + spare, np.int32)
     new_seg = np.empty_like(seg)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
@@ -765,11 +769,11 @@ def compact_heap(seg, heap, spare):
             a = seg[o, 0]
             d = start[o]
             for t in range(seg[o, 1]):
-                new_heap[d + t, 0] = heap[a + t, 0]
-                new_heap[d + t, 1] = heap[a + t, 1]
+                new_p[d + t] = heap_p[a + t]
+                new_j[d + t] = heap_j[a + t]
             new_seg[o, 0] = d
             new_seg[o, 1] = seg[o, 1]
-    return new_seg, new_heap, used
+    return new_seg, (new_p, new_j), used
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -779,9 +783,10 @@ def replace_lists(rows, mode, cache, walked, fresh, used):
     left the view), 1 only its ``fresh`` pairs (its lists were rebuilt against every light:
     it moved or came into view), 2 its cached pairs of lights not flagged in ``walked``
     followed by its fresh pairs (lights that changed were walked again). cache = (seg,
-    heap), updated in place; fresh = (start [N+1], pairs [F, 2]) grouped by object row."""
-    seg, heap = cache
-    f_start, f_pairs = fresh
+    (P, light row)), updated in place; fresh = (start [N+1], (P, light row)) grouped by
+    object row."""
+    seg, (heap_p, heap_j) = cache
+    f_start, (f_p, f_j) = fresh
     sizes = list_sizes(rows, mode, cache, walked, fresh)
     at = np.empty(rows.shape[0] + 1, np.int64)
     at[0] = used
@@ -792,32 +797,32 @@ def replace_lists(rows, mode, cache, walked, fresh, used):
         d = at[r]
         if mode[r] == 2:
             for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                if not walked[np.int64(heap[t, 1])]:
-                    heap[d, 0] = heap[t, 0]
-                    heap[d, 1] = heap[t, 1]
+                if not walked[heap_j[t]]:
+                    heap_p[d] = heap_p[t]
+                    heap_j[d] = heap_j[t]
                     d += 1
         if mode[r] != 0:
             for t in range(f_start[o], f_start[o + 1]):
-                heap[d, 0] = f_pairs[t, 0]
-                heap[d, 1] = f_pairs[t, 1]
+                heap_p[d] = f_p[t]
+                heap_j[d] = f_j[t]
                 d += 1
         seg[o, 0] = at[r]
         seg[o, 1] = d - at[r]
     return at[rows.shape[0]]
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def list_sizes(rows, mode, cache, walked, fresh):
-    """Records each new list of ``replace_lists`` takes."""
-    seg, heap = cache
+    """Records each new list of ``replace_lists`` takes (parallel over rows)."""
+    seg, (_, heap_j) = cache
     f_start = fresh[0]
     sizes = np.zeros(rows.shape[0], np.int64)
-    for r in range(rows.shape[0]):
+    for r in nb.prange(rows.shape[0]):
         o = rows[r]
         c = 0
         if mode[r] == 2:
             for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                c += not walked[np.int64(heap[t, 1])]
+                c += not walked[heap_j[t]]
         if mode[r] != 0:
             c += f_start[o + 1] - f_start[o]
         sizes[r] = c

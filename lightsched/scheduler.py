@@ -111,7 +111,7 @@ class _Cache:
     packed: tuple[np.ndarray, np.ndarray]
     grid: _Grid
     seg: np.ndarray            # pair cache: per object (start, length) in heap
-    heap: np.ndarray           # (P, light row) records
+    heap: tuple[np.ndarray, np.ndarray]   # (P float64, light row int32) per pair
     used: int                  # heap records in use (live or garbage)
     live: np.ndarray
     shadow_of_row: np.ndarray
@@ -343,7 +343,7 @@ class Scheduler(SceneAPI):
             seg = np.empty((n, 2), np.int64)
             seg[:, 0] = start[:-1]
             seg[:, 1] = np.diff(start)
-            used = heap.shape[0]
+            used = heap[0].size
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "grouped by object (every pair new)"
         else:
@@ -491,13 +491,14 @@ class Scheduler(SceneAPI):
                            p_params)
         return rows, offsets, count, pair_obj, pair_p
 
-    def _group(self, walked: tuple[np.ndarray, ...], n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Light-major pairs grouped by object row: (start [N+1], pairs [H, 2] (P, light
-        row)), object o's pairs at start[o]..start[o+1]-1."""
+    def _group(self, walked: tuple[np.ndarray, ...], n: int
+               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """Light-major pairs grouped by object row: (start [N+1], (P float64 [H], light row
+        int32 [H])), object o's pairs at start[o]..start[o+1]-1."""
         rows, offsets, count, pair_obj, pair_p = walked
         n_pairs = int(count.sum())
         start = np.empty(n + 1, np.int64)
-        heap = np.empty((n_pairs, 2))
+        heap = (np.empty(n_pairs), np.empty(n_pairs, np.int32))
         hist = self._scratch("hist", GROUP_PARTS * (n + 1), np.int64)
         group_pairs(rows, offsets, count, pair_obj, pair_p,
                     (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
@@ -506,7 +507,7 @@ class Scheduler(SceneAPI):
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...], fresh_obj: Any,
                fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int, np.ndarray]:
         """The cache's pair lists brought up to date, and the object rows to recompute.
 
         Objects holding a pair of a walked light (found by scanning the cache) and objects
@@ -516,7 +517,7 @@ class Scheduler(SceneAPI):
         flag = np.zeros(live.size, np.uint8)
         flag[walked] |= WALKED
         flag[(live != c.live) | (shadow_of_row != c.shadow_of_row)] |= RESELECT
-        holds = scan_pairs(c.seg, c.heap, flag) if flag.any() else np.zeros(n, np.uint8)
+        holds = scan_pairs(c.seg, c.heap[1], flag) if flag.any() else np.zeros(n, np.uint8)
         w_start, w_pairs = self._group(fresh, n)
         rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
         mode = np.full(n, 2, np.int8)
@@ -528,14 +529,14 @@ class Scheduler(SceneAPI):
         if fresh_obj is not None:
             o_start, o_pairs = self._group(fresh_obj, n)
         else:
-            o_start, o_pairs = np.zeros(n + 1, np.int64), np.zeros((0, 2))
+            o_start, o_pairs = np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32))
         # The cache's heap is this frame's too (records below ``used`` are not written):
         # new lists go after them, the heap packed first when short of room or mostly
         # garbage.
         seg, heap, used = c.seg.copy(), c.heap, c.used
         need = int(w_start[-1]) + int(seg[rows2, 1].sum()) + int(o_start[-1])
         n_live = int(seg[:, 1].sum())
-        if used + need > heap.shape[0] or used > 2 * (n_live + need) + 4096:
+        if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
             seg, heap, used = compact_heap(seg, heap, need + n_live // 2 + 1024)
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag,
