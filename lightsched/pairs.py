@@ -317,15 +317,12 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _exact_pair(hot, lf, j, lm, typ, v, vis_box, vis_rows, pair_obj, pair_p, n, model, w_obj,
-                w_int):
-    """The exact float64 Affects test of light j (mask lm) and visible object v (mask,
-    d2 <= r*r, then _pair_p); on a hit appends (object row, P) at n. Returns the new n."""
+def _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_rows, pair_obj, pair_p, n, model,
+                w_obj, w_int):
+    """The rest of the exact float64 Affects test of light j (mask lm) and visible object
+    v once d2 <= r*r holds (the mask, then _pair_p); on a hit appends (object row, P) at n.
+    Returns the new n."""
     if np.int64(vis_box[v, 6]) & lm == 0:
-        return n
-    r = hot[j, 3]
-    d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
-    if not d2 <= r * r:
         return n
     hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
     if hit:
@@ -349,7 +346,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     count = np.zeros(rows.shape[0], np.int64)
     n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
     for ch in nb.prange(n_chunks):
-        keep = np.empty(256, np.int32)
+        keep = (np.empty(256, np.int32), np.empty(256))
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
             keep = _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count,
                               keep, model, w_obj, w_int)
@@ -360,7 +357,8 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
 def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, keep, model,
                w_obj, w_int):
     """Light rows[t]'s pairs into its segment of pair_obj / pair_p (see light_pass);
-    returns the (possibly regrown) filter scratch."""
+    returns the (possibly regrown) filter scratch: positions that pass the range test and
+    their d2."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
     vis_box, vis_rows = vis
@@ -406,18 +404,24 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
             # test that fails at random would mispredict); the rest runs on survivors only.
             v0 = cell_start[base + z0]
             v1 = cell_start[base + z1 + 1]
-            if v1 - v0 > keep.shape[0]:
-                keep = np.empty(2 * (v1 - v0), np.int32)
+            if v1 - v0 > keep[0].shape[0]:
+                keep = (np.empty(2 * (v1 - v0), np.int32), np.empty(2 * (v1 - v0)))
+            kept, kept_d2 = keep
             m = 0
             for v in range(v0, v1):
-                keep[m] = v
-                m += box_d2(vis_box, v, p0, p1, p2) <= rr_exact
+                d2 = box_d2(vis_box, v, p0, p1, p2)
+                kept[m] = v
+                kept_d2[m] = d2
+                m += d2 <= rr_exact
             for i in range(m):
-                n = _exact_pair(hot, lf, j, lm, typ, keep[i], vis_box, vis_rows, pair_obj,
-                                pair_p, n, model, w_obj, w_int)
+                n = _exact_pair(hot, lf, j, lm, typ, kept[i], kept_d2[i], vis_box, vis_rows,
+                                pair_obj, pair_p, n, model, w_obj, w_int)
     for b in range(big_pos.shape[0]):
-        n = _exact_pair(hot, lf, j, lm, typ, big_pos[b], vis_box, vis_rows, pair_obj, pair_p,
-                        n, model, w_obj, w_int)
+        v = big_pos[b]
+        d2 = box_d2(vis_box, v, p0, p1, p2)
+        if d2 <= rr_exact:
+            n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_rows, pair_obj, pair_p, n,
+                            model, w_obj, w_int)
     count[t] = n - offsets[t]
     return keep
 

@@ -122,10 +122,14 @@ def box_d2(boxes, i, p0, p1, p2):
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def falloff(i, r, d2, e2):
     """i*w*w*g/(d2 + r0*r0) of the contribution model: q = d2/(r*r), w = max(0, 1 - q*q),
-    g = min(1, 4 r*r / e2) (1 for e2 = 0). P = falloff * s + p_user."""
+    g = min(1, 4 r*r / e2) (1 for e2 = 0). P = falloff * s + p_user.
+
+    g skips its division when 4 r*r >= e2: a correctly rounded a/b with a >= b > 0 is >= 1,
+    so min(1, a/b) is exactly 1 (most objects are small beside the light's range)."""
     q = d2 / (r * r)
     w = max(0.0, 1.0 - q * q)
-    g = 1.0 if e2 == 0.0 else min(1.0, 4.0 * r * r / e2)
+    a = 4.0 * r * r
+    g = 1.0 if e2 == 0.0 or a >= e2 else min(1.0, a / e2)
     return i * w * w * g / (d2 + R0 * R0)
 
 
