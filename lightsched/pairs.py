@@ -80,13 +80,17 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
     finer along z: a column of cells is one run of objects whatever its cell count, so a
     finer z trims each run to the light's chord at no cost per column."""
     extent = [max(float(hi[a]) - float(lo[a]), 0.0) for a in range(3)]
-    h = max(cell, max(extent) / (MAX_CELLS / RUN_SPLIT) ** (1 / 3) * 1.0001, 1e-300)
+    # From the edge asked for, grown only while the cells of this box's actual shape are too
+    # many (a flat city is not a cube: growing from a cubic estimate made cells twice too
+    # coarse at 1M objects).
+    h = max(cell, 1e-300)
     while True:
         edge = (h, h, h / RUN_SPLIT)
         dims = [max(math.ceil(extent[a] / edge[a]), 1) for a in range(3)]
-        if dims[0] * dims[1] * dims[2] <= MAX_CELLS:
+        cells = dims[0] * dims[1] * dims[2]
+        if cells <= MAX_CELLS:
             break
-        h *= 1.25
+        h *= max(1.01, min((cells / MAX_CELLS) ** (1 / 3), 1e3))
     g_f = np.array([float(lo[0]), float(lo[1]), float(lo[2]),
                     1.0 / edge[0], 1.0 / edge[1], 1.0 / edge[2]])
     return g_f, np.array(dims, np.int64)
@@ -118,22 +122,39 @@ def _centre_cells(lo, hi, visible, g_f, dims):
     return key
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _counting_sort(key, ncell):
-    counts = np.zeros(ncell + 2, np.int64)
-    for o in range(key.shape[0]):
-        if key[o] >= 0:
-            counts[key[o] + 1] += 1
+    """Rows with key >= 0 sorted by key (stable): (rows by position, position of each row or
+    -1, start of each key's positions [ncell + 2]). GROUP_PARTS runs of rows count and place
+    their own rows in parallel; the runs follow each other within a key, so the order is
+    the sequential one."""
+    n = key.shape[0]
+    hist = np.zeros((GROUP_PARTS, ncell + 1), np.int64)
+    for q in nb.prange(GROUP_PARTS):
+        for o in range(n * q // GROUP_PARTS, n * (q + 1) // GROUP_PARTS):
+            if key[o] >= 0:
+                hist[q, key[o]] += 1
+    cell_start = np.empty(ncell + 2, np.int64)
+    run = 0
     for c in range(ncell + 1):
-        counts[c + 1] += counts[c]
-    cell_start = counts.copy()
-    vis_rows = np.empty(counts[ncell + 1], np.int64)
-    pos_of = np.full(key.shape[0], -1, np.int64)
-    for o in range(key.shape[0]):
-        if key[o] >= 0:
-            vis_rows[counts[key[o]]] = o
-            pos_of[o] = counts[key[o]]
-            counts[key[o]] += 1
+        cell_start[c] = run
+        for q in range(GROUP_PARTS):
+            cnt = hist[q, c]
+            hist[q, c] = run
+            run += cnt
+    cell_start[ncell + 1] = run
+    vis_rows = np.empty(run, np.int64)
+    pos_of = np.empty(n, np.int64)
+    for q in nb.prange(GROUP_PARTS):
+        for o in range(n * q // GROUP_PARTS, n * (q + 1) // GROUP_PARTS):
+            c = key[o]
+            if c < 0:
+                pos_of[o] = -1
+                continue
+            d = hist[q, c]
+            vis_rows[d] = o
+            pos_of[o] = d
+            hist[q, c] = d + 1
     return vis_rows, pos_of, cell_start
 
 

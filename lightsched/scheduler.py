@@ -59,7 +59,7 @@ from .pairs import (
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
 from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
-from .shadows import culling_volumes, rank_shadow_lights, sweep_casters
+from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_casters
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -598,9 +598,7 @@ class Scheduler(SceneAPI):
                 reach = lights.position[rows_l]
                 r_lo = (reach - radius[:, None]).min(0)
                 r_hi = (reach + radius[:, None]).max(0)
-                hidden = np.flatnonzero(casts & ~vis_o)
-                near = (hi[hidden] >= r_lo).all(1) & (lo[hidden] <= r_hi).all(1)
-                hidden = hidden[near]
+                hidden = hidden_near(lo, hi, casts, vis_o, np.concatenate([r_lo, r_hi]))
                 nh = hidden.size
                 if nh:
                     g_f, dims = grid_shape(r_lo, r_hi,

@@ -409,3 +409,33 @@ def sweep_casters(lo, hi, casts, omask, lmask, vols):
                             acc |= 1 << b
                 bits[t, o] = acc
     return bits
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def hidden_near(lo, hi, casts, visible, box):
+    """Rows (ascending) of the invisible casting objects whose box meets ``box`` (lo, hi
+    [6]): the candidates a point or spot light's casters need beside the visible objects.
+    Per-chunk counts, then each chunk writes its own range (parallel, in row order)."""
+    n = lo.shape[0]
+    n_chunks = (n + 4095) // 4096
+    counts = np.zeros(n_chunks + 1, np.int64)
+    keep = np.zeros(n, np.bool_)
+    for ch in nb.prange(n_chunks):
+        c = 0
+        for o in range(ch * 4096, min(n, (ch + 1) * 4096)):
+            k = casts[o] and not visible[o]
+            for a in range(3):
+                k = k and hi[o, a] >= box[a] and lo[o, a] <= box[3 + a]
+            keep[o] = k
+            c += k
+        counts[ch + 1] = c
+    for ch in range(n_chunks):
+        counts[ch + 1] += counts[ch]
+    rows = np.empty(counts[n_chunks], np.int64)
+    for ch in nb.prange(n_chunks):
+        d = counts[ch]
+        for o in range(ch * 4096, min(n, (ch + 1) * 4096)):
+            if keep[o]:
+                rows[d] = o
+                d += 1
+    return rows
