@@ -8,6 +8,7 @@ only those when asked).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -152,3 +153,19 @@ def row_words(a: np.ndarray) -> np.ndarray:
         if rows.shape[1] % np.dtype(word).itemsize == 0:
             return rows.view(word)
     return rows
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def copy_rows(src, dst, rows):
+    """dst[r] = src[r] for the rows ``rows`` of two [N, W] arrays (parallel)."""
+    for i in nb.prange(rows.shape[0]):
+        r = rows[i]
+        for w in range(src.shape[1]):
+            dst[r, w] = src[r, w]
+
+
+def held_elsewhere(arrays: dict[str, np.ndarray]) -> bool:
+    """Whether anything but the dict itself references one of the arrays (a Frame, a view
+    of it, a buffer being sent): then they cannot be written again. CPython counts the
+    dict's reference, the loop variable's and getrefcount's own argument."""
+    return any(sys.getrefcount(a) > 3 for a in arrays.values())

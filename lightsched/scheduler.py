@@ -38,7 +38,7 @@ import numba as nb
 import numpy as np
 
 from .changes import camera_key, changed_rows, same_key
-from .frame import PER_OBJECT, Frame, empty_frame, freeze
+from .frame import PER_OBJECT, Frame, copy_rows, empty_frame, freeze, held_elsewhere
 from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
 from .pairs import (
     GROUP_PARTS,
@@ -76,6 +76,9 @@ PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
 # fade_state outputs; the float64 weights and last frame's selection are kept apart.
 _STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
           ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
+
+# Per-object outputs the object pass writes ("visible" is the visibility array itself).
+_OUT = tuple(name for name in PER_OBJECT if name != "visible")
 
 # light_flag bits of an incremental frame (pairs.scan_pairs): the light's pairs are
 # replaced (it changed, or entered or left the view); the objects holding its pairs must
@@ -137,6 +140,9 @@ class Scheduler(SceneAPI):
         # Last frame's shadow lights (ids) and their tiers, for the two hystereses.
         self._shadow_prev = (np.zeros(0, np.int32), np.zeros(0, np.int64))
         self._cache: _Cache | None = None
+        # The per-object output arrays of the frame before the last, and the rows by which
+        # they lag the last frame's (None: all); _outputs takes them back when free.
+        self._spare: tuple[dict[str, np.ndarray], np.ndarray | None] | None = None
 
     def _scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
         """A reusable buffer of at least ``size`` elements (grown by half when short), so a
@@ -363,23 +369,25 @@ class Scheduler(SceneAPI):
         state = (objs.get("slot_light"), objs.get("slot_weight"), objs.get("slot_state"),
                  objs.get("selected"))
         if full:
-            out = {name: np.empty((n, k) if shape == "NK" else n, dtype)
-                   for name, (dtype, shape, _) in PER_OBJECT.items()}
+            out = self._outputs(c, None, n, k)
             fading = np.empty(n, np.bool_)
+        elif run.size:
+            out = self._outputs(c, run, n, k)
+            fading = c.fading.copy()
         else:
-            last = c.frame
-            out = {name: getattr(last, name) for name in PER_OBJECT}
+            out = {name: getattr(c.frame, name) for name in _OUT}
             fading = c.fading
-            if run.size:
-                out = {name: arr.copy() for name, arr in out.items()}
-                fading = fading.copy()
+        if c is not None and run.size:
+            # The last frame's arrays lag this frame's by the rows this frame recomputes.
+            self._spare = ({name: getattr(c.frame, name) for name in _OUT},
+                           None if full else run)
         out["visible"] = vis_o
         if run.size:
             params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
                                _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
             object_pass(run, (vis_o, reset), (seg, heap), (lights.id, live), state,
-                        tuple(out[name] for name in PER_OBJECT if name != "visible")
-                        + (fading,), params, (shadow_of_row, cfg.max_shadowed_per_object))
+                        tuple(out[name] for name in _OUT) + (fading,), params,
+                        (shadow_of_row, cfg.max_shadowed_per_object))
         t = _lap(seconds, "objects", t)
 
         objs.put("slot_light", out["light_ids"])
@@ -444,6 +452,35 @@ class Scheduler(SceneAPI):
 
     # ------------------------------------------------------------------ stages
 
+    def _outputs(self, c: _Cache | None, behind_rows: np.ndarray | None, n: int, k: int
+                 ) -> dict[str, np.ndarray]:
+        """Arrays for this frame's per-object outputs (PER_OBJECT but "visible"): every row
+        is written when ``behind_rows`` is None (a full frame), else only those rows are,
+        the others must be the last frame's. The arrays of the frame before the last are
+        taken back when nothing outside holds them any more (a steady scene allocates no
+        output memory) and brought up to date with the rows the last frame changed; else
+        new arrays (copies of the last frame's for an incremental frame)."""
+        spare, lag = self._spare if self._spare is not None else (None, None)
+        self._spare = None
+        if (spare is not None and spare["light_ids"].shape == (n, k)
+                and not held_elsewhere(spare)):
+            for arr in spare.values():
+                arr.flags.writeable = True
+            if behind_rows is not None:
+                assert c is not None
+                for name, arr in spare.items():
+                    src = getattr(c.frame, name)
+                    if lag is None:
+                        np.copyto(arr, src)
+                    else:
+                        copy_rows(src.reshape(n, -1), arr.reshape(n, -1), lag)
+            return spare
+        if behind_rows is None:
+            return {name: np.empty((n, k) if PER_OBJECT[name][1] == "NK" else n,
+                                   PER_OBJECT[name][0]) for name in _OUT}
+        assert c is not None
+        return {name: getattr(c.frame, name).copy() for name in _OUT}
+
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                       is_dir: np.ndarray, what: str = "vis") -> _Grid:
@@ -465,13 +502,13 @@ class Scheduler(SceneAPI):
             median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
             g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
             plan = None
-        vis_rows, pos_of, cell_start = visible_order(objs.bounds_min, objs.bounds_max, select,
+        vis_rows, _, cell_start = visible_order(objs.bounds_min, objs.bounds_max, select,
                                                      g_f, dims)
         nv = vis_rows.size
         ncell = int(dims[0] * dims[1] * dims[2])
         n_small = int(cell_start[ncell])
         vis_box = np.empty((nv, 8))
-        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, pos_of, n_small,
+        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, vis_rows, n_small,
                               vis_box)
         big_pos = np.arange(n_small, nv, dtype=np.int32)
         if plan is None:
@@ -604,11 +641,11 @@ class Scheduler(SceneAPI):
                     g_f, dims = grid_shape(r_lo, r_hi,
                                            CELL_PER_RADIUS * float(np.median(radius)))
                     h_lo, h_hi = lo[hidden], hi[hidden]
-                    h_rows, h_pos, h_start = visible_order(h_lo, h_hi, np.ones(nh, np.bool_),
+                    h_rows, _, h_start = visible_order(h_lo, h_hi, np.ones(nh, np.bool_),
                                                            g_f, dims)
                     n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
                     h_box = np.empty((nh, 8))
-                    ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_pos, n_small, h_box)
+                    ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_rows, n_small, h_box)
                     h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
                     parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
                                                     (h_box, hidden[h_rows]), vols))
