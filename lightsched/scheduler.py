@@ -161,6 +161,9 @@ class Scheduler(SceneAPI):
         plan: dict[str, str] = {}
         t = time.perf_counter()
         c = self._cache
+        # Installed again at the end: a frame that stops half way (an exception) leaves no
+        # cache behind, so the next frame is full instead of trusting half-updated lists.
+        self._cache = None
         key = camera_key(cameras)
         same_cams = c is not None and same_key(key, c.cam_key)
         if same_cams:
@@ -189,7 +192,8 @@ class Scheduler(SceneAPI):
         pairs change; object rows whose casts_shadows changed). The rows are None when the
         rows themselves changed (set_/remove_ with other ids)."""
         if c is None:
-            return "first frame", None, None, None
+            why = "first frame" if self.frame_index == 0 else "the last frame stopped half way"
+            return why, None, None, None
         cfg = self.config
         lrows = changed_rows(c.lights, self.lights, LIGHT_FIELDS)
         if lrows is None:
@@ -210,6 +214,7 @@ class Scheduler(SceneAPI):
     def _unchanged(self, c: _Cache, seconds: dict[str, float], t: float) -> Frame:
         """Nothing moved, nothing fades, no cut: the last frame's arrays are this frame's
         (frames are read-only, so they can share them)."""
+        self._cache = c
         last = c.frame
         frame = Frame(**last.arrays())
         seconds["total"] = sum(seconds.values()) + (time.perf_counter() - t)
@@ -570,7 +575,7 @@ class Scheduler(SceneAPI):
         # The cache's heap is this frame's too (records below ``used`` are not written):
         # new lists go after them, the heap packed first when short of room or mostly
         # garbage.
-        seg, heap, used = c.seg.copy(), c.heap, c.used
+        seg, heap, used = c.seg, c.heap, c.used  # the cache is this frame's to change
         need = int(w_start[-1]) + int(seg[rows2, 1].sum()) + int(o_start[-1])
         n_live = int(seg[:, 1].sum())
         if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:

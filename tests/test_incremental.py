@@ -324,3 +324,24 @@ def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
             assert np.array_equal(getattr(f, name), a), f"kept frame {i}: {name} changed"
     # Two buffers take turns once the frames are dropped.
     assert len(set(addresses[2:])) <= 2, addresses
+
+
+def test_a_frame_that_stops_half_way_leaves_no_cache_behind(monkeypatch):
+    """The cache's lists are changed in place by an incremental frame; if it raises, the
+    next frame is full and right."""
+    import lightsched.scheduler as sched
+
+    t, lights, _, cams = _twin(ls.Config(max_lights=3))
+    t.frame(cams)
+    lights["position"][:30] += 1.0
+    t.update_lights(id=lights["id"][:30], position=lights["position"][:30])
+
+    def boom(*args: Any) -> None:
+        raise RuntimeError("stopped half way")
+
+    monkeypatch.setattr(sched, "object_pass", boom)
+    with pytest.raises(RuntimeError):
+        t.fast.frame(cams)
+    monkeypatch.undo()
+    f, _ = t.frame(cams)
+    assert _plan(f) == "full: the last frame stopped half way", f.stats["plan"]
