@@ -97,10 +97,12 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _centre_cells(lo, hi, visible, g_f, dims):
+def _centre_cells(lo, hi, visible, g_f, dims, frame):
     """Per object: its centre's cell, ncell for an object with a half-extent over one cell
     edge (it goes past the last cell, to the big objects every light tests directly), or
-    -1 if invisible."""
+    -1 if invisible. frame = (origin [3], single): the box as its record will hold it
+    (``record_coord``), so cells and records agree."""
+    origin, single = frame
     n = lo.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     cell_edge = 1.0 / g_f[3]
@@ -109,17 +111,28 @@ def _centre_cells(lo, hi, visible, g_f, dims):
         if not visible[o]:
             key[o] = -1
             continue
-        big = False
-        for a in range(3):
-            big |= (hi[o, a] - lo[o, a]) / 2 > cell_edge
-        if big:
+        lx = record_coord(lo[o, 0], origin[0], single)
+        ly = record_coord(lo[o, 1], origin[1], single)
+        lz = record_coord(lo[o, 2], origin[2], single)
+        hx = record_coord(hi[o, 0], origin[0], single)
+        hy = record_coord(hi[o, 1], origin[1], single)
+        hz = record_coord(hi[o, 2], origin[2], single)
+        if (hx - lx) / 2 > cell_edge or (hy - ly) / 2 > cell_edge or (hz - lz) / 2 > cell_edge:
             key[o] = ncell
             continue
-        x = _cell((lo[o, 0] + hi[o, 0]) / 2, g_f[0], g_f[3], dims[0])
-        y = _cell((lo[o, 1] + hi[o, 1]) / 2, g_f[1], g_f[4], dims[1])
-        z = _cell((lo[o, 2] + hi[o, 2]) / 2, g_f[2], g_f[5], dims[2])
+        x = _cell((lx + hx) / 2, g_f[0], g_f[3], dims[0])
+        y = _cell((ly + hy) / 2, g_f[1], g_f[4], dims[1])
+        z = _cell((lz + hz) / 2, g_f[2], g_f[5], dims[2])
         key[o] = (x * dims[1] + y) * dims[2] + z
     return key
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def record_coord(x, origin, single):
+    """A coordinate as an object record holds it: x - origin, rounded to float32 in
+    "fast" precision (origin the first camera), x itself in exact precision (origin 0)."""
+    d = x - origin
+    return np.float64(np.float32(d)) if single else d
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -185,25 +198,29 @@ def light_order(hot, rows, g_f, dims):
 
 
 def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.ndarray,
-                  dims: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  dims: np.ndarray, frame: tuple[np.ndarray, bool]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Visible object rows sorted by the cell of their centre (a counting sort: neighbours
     in space become neighbours in memory). Returns (vis_rows int64[V], pos_of int64[N]
     (-1 if invisible), cell_start int64[ncell+2]): the objects centred in cell c are
     positions cell_start[c] .. cell_start[c+1]-1, so a column of cells is one run; the
     objects larger than a cell come last, from cell_start[ncell] to V. The caster grid
-    passes its own selection as ``visible``."""
-    key = _centre_cells(lo, hi, visible, g_f, dims)
+    passes its own selection as ``visible``; frame = (origin, single) of the records."""
+    key = _centre_cells(lo, hi, visible, g_f, dims, frame)
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def visible_objects(lo, hi, omask, vis_rows, n_small, vis_box):
-    """Per grid position v (parallel), written into vis_box [V, 8] float64 (a reused
-    buffer): (lo, hi, mask, e2 = |hi - lo|^2) of object row vis_rows[v], one cache line per
-    object for the tests. Returns the largest half-extent per axis of the objects at
-    positions below n_small (those in cells), which widens every light's cell range.
-    Positions are written in order and rows read where they are: measured ~35% faster than
-    the other way round at 100k objects. Per-chunk maxima keep the reduction parallel."""
+def visible_objects(lo, hi, omask, vis_rows, n_small, recs, origin):
+    """Per grid position v (parallel), written into recs = (vis_box [V, 8], its integer view
+    vis_bits): (lo - origin, hi - origin, mask (as bits), 0) of object row
+    vis_rows[v], one cache line per object for the tests (float64, origin 0: exact
+    precision; float32 relative to the first camera: "fast", half a line). Returns the
+    largest half-extent per axis of the objects at positions below n_small (those in
+    cells), which widens every light's cell range. Positions are written in order and rows
+    read where they are: measured ~35% faster than the other way round at 100k objects.
+    Per-chunk maxima keep the reduction parallel."""
+    vis_box, vis_bits = recs
     nv = vis_rows.shape[0]
     n_chunks = (nv + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     chunk_ext = np.zeros((n_chunks, 3))
@@ -211,15 +228,15 @@ def visible_objects(lo, hi, omask, vis_rows, n_small, vis_box):
         for v in range(ch * OBJECT_CHUNK, min(nv, (ch + 1) * OBJECT_CHUNK)):
             o = vis_rows[v]
             for a in range(3):
-                vis_box[v, a] = lo[o, a]
-                vis_box[v, 3 + a] = hi[o, a]
+                vis_box[v, a] = lo[o, a] - origin[a]
+                vis_box[v, 3 + a] = hi[o, a] - origin[a]
                 if v < n_small:
-                    chunk_ext[ch, a] = max(chunk_ext[ch, a], (hi[o, a] - lo[o, a]) / 2)
-            ex = hi[o, 0] - lo[o, 0]
-            ey = hi[o, 1] - lo[o, 1]
-            ez = hi[o, 2] - lo[o, 2]
-            vis_box[v, 6] = omask[o]
-            vis_box[v, 7] = ex * ex + ey * ey + ez * ez
+                    # From the record as stored (float32 in "fast" precision), as the walk
+                    # sees it.
+                    half = (np.float64(vis_box[v, 3 + a]) - np.float64(vis_box[v, a])) / 2
+                    chunk_ext[ch, a] = max(chunk_ext[ch, a], half)
+            vis_bits[v, 6] = omask[o]
+            vis_box[v, 7] = 0.0
     ext = np.zeros(3)
     for ch in range(n_chunks):
         for a in range(3):
@@ -320,10 +337,9 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
     """(affects, P) of light j and visible object v once d2 <= r*r holds: the spot cone and
     the model's P (priority.py holds the rules). The bounding sphere (centre (lo + hi)/2,
     R = |hi - lo|/2) is only built when a rule needs it."""
-    e2 = vis_box[v, 7]
+    geo = _geometry(vis_box, v)
+    e2 = geo[4]
     if typ == SPOT or model != MODEL_CONTRIBUTION:
-        geo = ((vis_box[v, 0] + vis_box[v, 3]) / 2, (vis_box[v, 1] + vis_box[v, 4]) / 2,
-               (vis_box[v, 2] + vis_box[v, 5]) / 2, math.sqrt(e2) / 2, e2)
         s = 1.0
         if typ == SPOT:
             meets, s = spot_cone(hot, lf, j, geo, model == MODEL_CONTRIBUTION)
@@ -336,12 +352,12 @@ def _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_rows, pair_obj, pair_p, n, model,
-                w_obj, w_int):
+def _exact_pair(hot, lf, j, lm, typ, v, d2, vis, pair_obj, pair_p, n, model, w_obj, w_int):
     """The rest of the exact float64 Affects test of light j (mask lm) and visible object
     v once d2 <= r*r holds (the mask, then _pair_p); on a hit appends (object row, P) at n.
     Returns the new n."""
-    if np.int64(vis_box[v, 6]) & lm == 0:
+    vis_box, vis_bits, vis_rows = vis
+    if np.int64(vis_bits[v, 6]) & lm == 0:
         return n
     hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int)
     if hit:
@@ -357,7 +373,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
 
     lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
-    big_pos); vis = (vis_box, vis_rows); params = (model, w_obj,
+    big_pos); vis = (vis_box, vis_bits, vis_rows); params = (model, w_obj,
     w_int). Returns count per light."""
     model = int(params[0])
     w_obj = params[1]
@@ -380,7 +396,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     their d2."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_rows = vis
+    vis_box, vis_bits, vis_rows = vis
     n_vis = vis_box.shape[0]
     j = rows[t]
     lm = np.int64(hot[j, 4])
@@ -389,7 +405,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
     if typ == DIRECTIONAL:
         p = hot[j, 6] + hot[j, 7]
         for v in range(n_vis):
-            if np.int64(vis_box[v, 6]) & lm != 0:
+            if np.int64(vis_bits[v, 6]) & lm != 0:
                 pair_obj[n] = vis_rows[v]
                 pair_p[n] = p
                 n += 1
@@ -433,14 +449,14 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
                 kept_d2[m] = d2
                 m += d2 <= rr_exact
             for i in range(m):
-                n = _exact_pair(hot, lf, j, lm, typ, kept[i], kept_d2[i], vis_box, vis_rows,
-                                pair_obj, pair_p, n, model, w_obj, w_int)
+                n = _exact_pair(hot, lf, j, lm, typ, kept[i], kept_d2[i], vis, pair_obj,
+                                pair_p, n, model, w_obj, w_int)
     for b in range(big_pos.shape[0]):
         v = big_pos[b]
         d2 = box_d2(vis_box, v, p0, p1, p2)
         if d2 <= rr_exact:
-            n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_rows, pair_obj, pair_p, n,
-                            model, w_obj, w_int)
+            n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis, pair_obj, pair_p, n, model, w_obj,
+                            w_int)
     count[t] = n - offsets[t]
     return keep
 
@@ -453,7 +469,7 @@ def affects_any(lights, rows, grid, vis):
     every light."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    vis_box = vis[0]
+    vis_box, vis_bits = vis[0], vis[1]
     out = np.zeros(rows.shape[0], np.bool_)
     for t in nb.prange(rows.shape[0]):
         j = rows[t]
@@ -462,7 +478,7 @@ def affects_any(lights, rows, grid, vis):
         hit = False
         if typ == DIRECTIONAL:
             for v in range(vis_box.shape[0]):
-                if np.int64(vis_box[v, 6]) & lm != 0:
+                if np.int64(vis_bits[v, 6]) & lm != 0:
                     hit = True
                     break
             out[t] = hit
@@ -478,21 +494,21 @@ def affects_any(lights, rows, grid, vis):
                     break
                 v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
                 for v in range(v0, v1):
-                    if _affects(hot, lf, j, lm, typ, v, vis_box):
+                    if _affects(hot, lf, j, lm, typ, v, vis_box, vis_bits):
                         hit = True
                         break
         for b in range(big_pos.shape[0]):
             if hit:
                 break
-            hit = _affects(hot, lf, j, lm, typ, big_pos[b], vis_box)
+            hit = _affects(hot, lf, j, lm, typ, big_pos[b], vis_box, vis_bits)
         out[t] = hit
     return out
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _affects(hot, lf, j, lm, typ, v, vis_box):
+def _affects(hot, lf, j, lm, typ, v, vis_box, vis_bits):
     """DESIGN "Affects" of point or spot light j (mask lm) and visible object v."""
-    if np.int64(vis_box[v, 6]) & lm == 0:
+    if np.int64(vis_bits[v, 6]) & lm == 0:
         return False
     r = hot[j, 3]
     d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
@@ -500,10 +516,25 @@ def _affects(hot, lf, j, lm, typ, v, vis_box):
         return False
     if typ != SPOT:
         return True
-    e2 = vis_box[v, 7]
-    geo = ((vis_box[v, 0] + vis_box[v, 3]) / 2, (vis_box[v, 1] + vis_box[v, 4]) / 2,
-           (vis_box[v, 2] + vis_box[v, 5]) / 2, math.sqrt(e2) / 2, e2)
-    return spot_cone(hot, lf, j, geo, False)[0]
+    return spot_cone(hot, lf, j, _geometry(vis_box, v), False)[0]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _geometry(box, v):
+    """(centre x, y, z, R, e2) of record v: centre (lo + hi)/2, e2 = |hi - lo|^2, R =
+    sqrt(e2)/2 (DESIGN "Affects"), in float64 whatever the records' precision (float32 +
+    float32 would round in float32)."""
+    lx = np.float64(box[v, 0])
+    ly = np.float64(box[v, 1])
+    lz = np.float64(box[v, 2])
+    hx = np.float64(box[v, 3])
+    hy = np.float64(box[v, 4])
+    hz = np.float64(box[v, 5])
+    ex = hx - lx
+    ey = hy - ly
+    ez = hz - lz
+    e2 = ex * ex + ey * ey + ez * ez
+    return ((lx + hx) / 2, (ly + hy) / 2, (lz + hz) / 2, math.sqrt(e2) / 2, e2)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -511,14 +542,14 @@ def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
     """Appends (object row, caster mask) of grid position v for shadowed light row j at n
     when it is a caster: casts_shadows, mask, d2 <= r*r, then shadows.caster_bits.
     Returns the new n."""
-    box, box_rows, lo, hi = recs
+    box, bits_view, box_rows, lo, hi, w_lo, w_hi = recs
     o = box_rows[v]
-    if not casts[o] or np.int64(box[v, 6]) & np.int64(hot[j, 4]) == 0:
+    if not casts[o] or np.int64(bits_view[v, 6]) & np.int64(hot[j, 4]) == 0:
         return n
     r = hot[j, 3]
     if not box_d2(box, v, hot[j, 0], hot[j, 1], hot[j, 2]) <= r * r:
         return n
-    bits = caster_bits(hot, lf, j, typ, vols, t, lo, hi, v)
+    bits = caster_bits(hot, lf, j, typ, vols, t, (lo, hi, v), (w_lo, w_hi, o))
     if bits != 0:
         out_rows[n] = o
         out_mask[n] = bits
@@ -527,18 +558,22 @@ def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def grid_casters(lights, rows, grid, recs, casts, vols, offsets, out):
+def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     """Casters (DESIGN "Casters") of the shadowed point and spot lights ``rows`` (parallel)
     among the objects of a grid built like the light pass's (visible_order /
     visible_objects): each light walks the same column runs as ``light_pass`` and keeps
     the objects that pass ``_caster``. vols = culling volumes indexed like rows; recs =
-    (records [V, 8], object row per position); out = (object rows, caster masks), light t
+    (records [V, 8], their integer view, object row per position); objects = (casts_shadows,
+    bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
+    records may be relative to the first camera); out = (object rows, caster masks), light t
     writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
     a light's rows come in grid order."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    box, box_rows = recs
-    walk = (box, box_rows, box[:, 0:3], box[:, 3:6])
+    box, bits_view, box_rows = recs
+    casts = objects[0]
+    # Flat: numba's parallel loops take no tuple nested in a tuple of arrays.
+    walk = (box, bits_view, box_rows, box[:, 0:3], box[:, 3:6], objects[1], objects[2])
     # Unpacked here: arrays taken out of a tuple inside the parallel loop were written to
     # copies (numba 0.68 parfors), and the stores were lost.
     out_rows, out_mask = out

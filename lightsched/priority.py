@@ -30,13 +30,13 @@ MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
-          cam_pos, cam_basis, cam_tan, cam_focus, thesis_w):
+          cam_pos, cam_basis, cam_tan, cam_focus, thesis_w, origin):
     n = typ.shape[0]
     hot = np.zeros((n, 8))
     lf = np.zeros((n, 8))
     for j in nb.prange(n):
         for k in range(3):
-            hot[j, k] = position[j, k]
+            hot[j, k] = position[j, k] - origin[k]
             lf[j, k] = direction[j, k]
         hot[j, 3] = radius[j]
         hot[j, 4] = mask[j]
@@ -62,15 +62,19 @@ def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask,
 
 
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
-                c1: float, camera_term: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                c1: float, camera_term: bool = True, origin: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Packs the light store into the row layout above (one cache-friendly row per light).
     Without ``camera_term`` (the contribution model, which does not read it) light_f
-    column 7 is -inf: the eccentricity is the packing's costliest part."""
+    column 7 is -inf: the eccentricity is the packing's costliest part. Positions are
+    relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
+    is x)."""
     cams = slice(None) if camera_term else slice(0)
     return _pack(lights.type, lights.position, lights.radius, lights.direction,
                  lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
                  lights.mask, lights.id, frames.position[cams], frames.basis[cams],
-                 frames.tan_xy[cams], frames.focus[cams], np.array([w_ecc, w_dist, c1]))
+                 frames.tan_xy[cams], frames.focus[cams], np.array([w_ecc, w_dist, c1]),
+                 np.zeros(3) if origin is None else origin)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

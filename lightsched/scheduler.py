@@ -205,6 +205,8 @@ class Scheduler(SceneAPI):
         why = None
         if not same_cams and cfg.model == "thesis":
             why = "the cameras moved (thesis priorities depend on them)"
+        elif not same_cams and cfg.precision == "fast":
+            why = "the cameras moved (fast precision works relative to the first camera)"
         elif lrows.size > FULL_SHARE * max(len(self.lights), 1):
             why = f"{lrows.size} of {len(self.lights)} lights changed"
         elif orows.size > FULL_SHARE * max(len(self.objects), 1):
@@ -241,6 +243,10 @@ class Scheduler(SceneAPI):
         cfg = self.config
         lights, objs = self.lights, self.objects
         n, n_l = len(objs), len(lights)
+        # Object records and packed lights: world float64 (exact), or float32 relative to
+        # the first camera ("fast": half the bytes a record; the arithmetic stays float64).
+        fast = cfg.precision == "fast"
+        rec_frame = (frames.position[0].copy() if fast else np.zeros(3), fast)
 
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
@@ -254,7 +260,7 @@ class Scheduler(SceneAPI):
 
         if full or lrows.size or (not same_cams and cfg.model != "contribution"):
             packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
-                                 cfg.model == "thesis")
+                                 cfg.model == "thesis", rec_frame[0])
         else:
             packed = c.packed
         is_dir = lights.type == DIRECTIONAL
@@ -272,7 +278,7 @@ class Scheduler(SceneAPI):
             fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
             left_rows = np.flatnonzero(c.vis_o & ~vis_o)
         if full or fresh_rows.size or left_rows.size:
-            grid = self._visible_grid(vis_o, box, packed, compete, is_dir)
+            grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame)
         else:
             grid = c.grid
         plan["pairs"] = grid.plan
@@ -300,7 +306,7 @@ class Scheduler(SceneAPI):
             if fresh_rows.size:
                 sub = np.zeros(n, np.bool_)
                 sub[fresh_rows] = True
-                small = self._visible_grid(sub, box, packed, compete, is_dir, "small")
+                small = self._visible_grid(sub, box, packed, compete, is_dir, rec_frame)
                 every = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
                                     small.grid[0], small.grid[1])
                 fresh_obj = self._walk(packed, every, small, p_params, "small")
@@ -344,7 +350,7 @@ class Scheduler(SceneAPI):
             recompute = np.array([changed_l[r] or int(r) not in c.casters
                                   for r in shadow_rows.tolist()], np.bool_)
         casters, kept_casters, plan["casters"] = self._casters(
-            frames, splits, shadow_rows, packed, grid, vis_o, recompute,
+            frames, splits, shadow_rows, packed, grid, rec_frame, vis_o, recompute,
             None if c is None else c.casters)
         t = _lap(seconds, "casters", t)
 
@@ -424,9 +430,9 @@ class Scheduler(SceneAPI):
                 why.append("a cut")
             plan["frame"] = "incremental: " + ", ".join(why)
         plan["visibility"] = f"frustum planes, {len(frames)} camera(s)"
-        plan["priority"] = cfg.model + " (exact float64)"
-        if cfg.precision == "fast":
-            plan["priority"] += "; precision 'fast' not built yet, ran exact"
+        plan["priority"] = cfg.model + (
+            " (fast: float32 object records relative to the first camera, float64 arithmetic)"
+            if fast else " (exact float64)")
         plan["fade"] = "fused with selection in the object pass"
         plan["shadows"] = (f"{shadow_rows.size} of {int(candidate.sum())} candidates shadowed "
                            "(ranking, tiers, slot_shadow)"
@@ -488,15 +494,15 @@ class Scheduler(SceneAPI):
 
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
-                      is_dir: np.ndarray, what: str = "vis") -> _Grid:
+                      is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> _Grid:
         """The selected objects sorted into a grid of cells (edge CELL_PER_RADIUS x the
-        median radius of the competing point and spot lights), with their records; a single
-        cell when there are few enough pairs for brute force."""
+        median radius of the competing point and spot lights), with their records in the
+        frame (origin, single) of the packed lights; a single cell when there are few
+        enough pairs for brute force."""
         objs = self.objects
         n_sel = int(np.count_nonzero(select))
         point_rows = np.flatnonzero(compete & ~is_dir)
-        if n_sel == 0:
-            box = np.zeros(6)
+        box = np.zeros(6) if n_sel == 0 else _frame_box(box, frame)
         if point_rows.size * n_sel <= BRUTE_FORCE_PAIRS:
             # One cell holding every selected object: each light tests them all.
             g_f, dims = grid_shape(box[:3], box[3:],
@@ -507,20 +513,13 @@ class Scheduler(SceneAPI):
             median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
             g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
             plan = None
-        vis_rows, _, cell_start = visible_order(objs.bounds_min, objs.bounds_max, select,
-                                                     g_f, dims)
-        nv = vis_rows.size
-        ncell = int(dims[0] * dims[1] * dims[2])
-        n_small = int(cell_start[ncell])
-        vis_box = np.empty((nv, 8))
-        ext = visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, vis_rows, n_small,
-                              vis_box)
-        big_pos = np.arange(n_small, nv, dtype=np.int32)
+        grid, recs = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
+                                  dims, frame)
         if plan is None:
             plan = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                    f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {big_pos.size} objects "
+                    f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {grid[4].size} objects "
                     "larger than a cell tested directly)")
-        return _Grid((g_f, dims, cell_start, ext, big_pos), (vis_box, vis_rows), plan)
+        return _Grid(grid, recs, plan)
 
     def _walk(self, packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray, grid: _Grid,
               p_params: np.ndarray, name: str) -> tuple[np.ndarray, ...]:
@@ -593,7 +592,7 @@ class Scheduler(SceneAPI):
 
     def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                  lights_packed: tuple[np.ndarray, np.ndarray], grid: _Grid,
-                 vis_o: np.ndarray, recompute: np.ndarray,
+                 frame: tuple[np.ndarray, bool], vis_o: np.ndarray, recompute: np.ndarray,
                  cached: dict[int, tuple[np.ndarray, np.ndarray]] | None
                  ) -> tuple[tuple[np.ndarray, ...], dict[int, tuple[np.ndarray, np.ndarray]], str]:
         """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
@@ -638,22 +637,19 @@ class Scheduler(SceneAPI):
                 # own (same construction as the grid of visible objects).
                 radius = lights.radius[rows_l]
                 reach = lights.position[rows_l]
-                r_lo = (reach - radius[:, None]).min(0)
-                r_hi = (reach + radius[:, None]).max(0)
-                hidden = hidden_near(lo, hi, casts, vis_o, np.concatenate([r_lo, r_hi]))
+                r_box = np.concatenate([(reach - radius[:, None]).min(0),
+                                        (reach + radius[:, None]).max(0)])
+                hidden = hidden_near(lo, hi, casts, vis_o, r_box)
                 nh = hidden.size
                 if nh:
-                    g_f, dims = grid_shape(r_lo, r_hi,
+                    f_box = _frame_box(r_box, frame)
+                    g_f, dims = grid_shape(f_box[:3], f_box[3:],
                                            CELL_PER_RADIUS * float(np.median(radius)))
-                    h_lo, h_hi = lo[hidden], hi[hidden]
-                    h_rows, _, h_start = visible_order(h_lo, h_hi, np.ones(nh, np.bool_),
-                                                           g_f, dims)
-                    n_small = int(h_start[int(dims[0] * dims[1] * dims[2])])
-                    h_box = np.empty((nh, 8))
-                    ext = visible_objects(h_lo, h_hi, objs.mask[hidden], h_rows, n_small, h_box)
-                    h_grid = (g_f, dims, h_start, ext, np.arange(n_small, nh, dtype=np.int32))
+                    h_grid, (h_box, h_bits, h_rows) = _object_grid(
+                        lo[hidden], hi[hidden], objs.mask[hidden], np.ones(nh, np.bool_), g_f,
+                        dims, frame)
                     parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
-                                                    (h_box, hidden[h_rows]), vols))
+                                                    (h_box, h_bits, hidden[h_rows]), vols))
                 for i, t in enumerate(local):
                     rows = np.concatenate([p[0][i] for p in parts])
                     masks = np.concatenate([p[1][i] for p in parts])
@@ -674,11 +670,40 @@ class Scheduler(SceneAPI):
         """Per light of ``rows``, (object rows, masks) of its casters in one grid."""
         offsets = light_bounds(lights_packed[0], rows, grid, recs[0].shape[0])
         out = (np.empty(int(offsets[-1]), np.int64), np.empty(int(offsets[-1]), np.uint32))
-        count = grid_casters(lights_packed, rows, grid, recs, self.objects.casts_shadows, vols,
+        objs = self.objects
+        count = grid_casters(lights_packed, rows, grid, recs,
+                             (objs.casts_shadows, objs.bounds_min, objs.bounds_max), vols,
                              offsets, out)
         ends = offsets[:-1] + count
         return ([out[0][a:b] for a, b in zip(offsets[:-1], ends, strict=True)],
                 [out[1][a:b] for a, b in zip(offsets[:-1], ends, strict=True)])
+
+
+def _frame_box(box: np.ndarray, frame: tuple[np.ndarray, bool]) -> np.ndarray:
+    """A world box (lo, hi) in the records' frame: relative to the origin, and in "fast"
+    precision widened by float32's rounding so that it holds every rounded record."""
+    origin, single = frame
+    rel = box - np.concatenate([origin, origin])
+    if single:
+        pad = np.abs(rel) * 2.0**-22 + 1e-30
+        rel = rel + np.concatenate([-pad[:3], pad[3:]])
+    return rel
+
+
+def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,
+                 g_f: np.ndarray, dims: np.ndarray, frame: tuple[np.ndarray, bool]
+                 ) -> tuple[tuple, tuple]:
+    """The selected rows of (lo, hi, mask) sorted into the grid (g_f, dims), and their
+    records: (grid (g_f, dims, cell_start, ext, big_pos), (records [V, 8], their integer
+    view, row per position)). Records are float64, or float32 in "fast" precision."""
+    vis_rows, _, cell_start = visible_order(lo, hi, select, g_f, dims, frame)
+    nv = vis_rows.size
+    n_small = int(cell_start[int(dims[0] * dims[1] * dims[2])])
+    vis_box = np.empty((nv, 8), np.float32 if frame[1] else np.float64)
+    vis_bits = vis_box.view(np.uint32 if frame[1] else np.uint64)
+    ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
+    big_pos = np.arange(n_small, nv, dtype=np.int32)
+    return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows)
 
 
 def _rate(dt: float, fade_time: float) -> float:

@@ -348,24 +348,29 @@ def cube_faces(p0, p1, p2, r, lo_v, hi_v, v):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def caster_bits(hot, lf, j, typ, vols, t, lo, hi, v):
-    """caster_masks entry of box v ([lo, hi] rows) for point or spot light row j, whose
-    culling volumes are vols[.][t] (one per camera), once the caller has checked
-    casts_shadows, the mask and d2 <= r*r: the spot cone, then some camera's hull, then the
-    cube faces (point) or bit 0 (spot). 0: not a caster."""
+def caster_bits(hot, lf, j, typ, vols, t, rec, world):
+    """caster_masks entry of an object for point or spot light row j, whose culling volumes
+    are vols[.][t] (one per camera), once the caller has checked casts_shadows, the mask
+    and d2 <= r*r: the spot cone, then some camera's hull, then the cube faces (point) or
+    bit 0 (spot). 0: not a caster. rec = (lo, hi, v): the box as row v of the grid records,
+    in the light's frame (the packed light's); world = (lo, hi, o): the box as row o of
+    the store, in world space like the volumes."""
     vn, vq, vm, _ = vols
+    lo, hi, v = rec
     if typ == SPOT:
-        ex = hi[v, 0] - lo[v, 0]
-        ey = hi[v, 1] - lo[v, 1]
-        ez = hi[v, 2] - lo[v, 2]
+        # float64 whatever the records' precision (float32 + float32 rounds in float32).
+        lx, ly, lz = np.float64(lo[v, 0]), np.float64(lo[v, 1]), np.float64(lo[v, 2])
+        hx, hy, hz = np.float64(hi[v, 0]), np.float64(hi[v, 1]), np.float64(hi[v, 2])
+        ex = hx - lx
+        ey = hy - ly
+        ez = hz - lz
         e2 = ex * ex + ey * ey + ez * ez
-        geo = ((lo[v, 0] + hi[v, 0]) / 2, (lo[v, 1] + hi[v, 1]) / 2,
-               (lo[v, 2] + hi[v, 2]) / 2, math.sqrt(e2) / 2, e2)
+        geo = ((lx + hx) / 2, (ly + hy) / 2, (lz + hz) / 2, math.sqrt(e2) / 2, e2)
         meets, _ = spot_cone(hot, lf, j, geo, False)
         if not meets:
             return 0
     for k in range(vm.shape[1]):
-        if vm[t, k] >= 0 and box_in_volume(vols, t, k, lo, hi, v):
+        if vm[t, k] >= 0 and box_in_volume(vols, t, k, world[0], world[1], world[2]):
             if typ == SPOT:
                 return 1
             return cube_faces(hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], lo, hi, v)

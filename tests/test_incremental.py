@@ -261,10 +261,11 @@ class _Pair:
         return call
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_incremental_city_is_bit_identical_to_full_frames(seed):
+@pytest.mark.parametrize("seed,precision", [(0, "exact"), (1, "exact"), (2, "fast")])
+def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
     scene = city(20_000, 2_000, seed=seed, shadow_fraction=0.02, sun_shadows=True)
-    cfg = ls.Config(max_lights=8, fade_in=0.1, fade_out=0.1, shadow_budget=4)
+    cfg = ls.Config(max_lights=8, fade_in=0.1, fade_out=0.1, shadow_budget=4,
+                    precision=precision)
     p = _Pair(cfg)
     p.set_lights(**scene.lights)
     p.set_objects(**scene.objects)
