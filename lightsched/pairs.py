@@ -7,8 +7,9 @@ object. Pairs are plain arrays (row, P), never Python objects.
 
 The work is light-major, in four kernels:
 1. ``visible_order`` + ``visible_objects``: visible objects sorted by the grid cell of their
-   centre (a counting sort), one 64-byte record each; objects larger than a cell go past the
-   last cell, to a short list every light tests.
+   centre (a counting sort), one record each (lo, hi, mask: 64 bytes in float64, 32 in the
+   "fast" precision's float32 relative to the first camera); objects larger than a cell go
+   past the last cell, to a short list every light tests.
 2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
    the centre of an object it reaches (its sphere widened by the largest object
    half-extent, cut column by column), each column one contiguous run of objects; the
@@ -19,9 +20,12 @@ The work is light-major, in four kernels:
    memory.
    Lights are walked in grid-cell order (``light_order``) so neighbouring lights share
    the objects in cache.
-3. ``group_pairs``: a counting sort of the pairs by object row.
-4. ``object_pass`` (parallel over objects in row order): state in, selection, fade, outputs
-   out, all sequential in memory.
+3. ``group_pairs``: a counting sort of the pairs by object row, into the pair cache (per
+   object a segment of (P, light row)), which the next frame keeps: ``scan_pairs`` finds
+   the objects holding pairs of lights that changed, ``replace_lists`` rewrites their
+   segments, ``compact_heap`` packs the cache when it is mostly garbage.
+4. ``object_pass`` (parallel over objects in row order, all of them or those an
+   incremental frame recomputes): state in, selection, fade, outputs out.
 A scene small enough for brute force is the same pipeline with a single cell.
 """
 
