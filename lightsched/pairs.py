@@ -323,6 +323,9 @@ def light_bounds(hot, rows, grid, n_vis):
             out[t] = n_vis
             continue
         c = _light_cells(hot, j, g_f, dims, ext)
+        if _sweeps(c, dims):
+            out[t] = n_vis
+            continue
         total = big_pos.shape[0]
         # The whole cube, not the sphere cut: a looser bound is cheaper to count.
         for x in range(c[0], c[3] + 1):
@@ -415,13 +418,14 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
                 n += 1
         count[t] = n - offsets[t]
         return keep
-    r = hot[j, 3]
-    p0 = hot[j, 0]
-    p1 = hot[j, 1]
-    p2 = hot[j, 2]
-    rr_exact = r * r
     c = _light_cells(hot, j, g_f, dims, ext)
     rr = _reach2(hot, j)
+    if _sweeps(c, dims):
+        # A light over most of the grid scans every object in one run: the per-column
+        # walk would cost more than the objects it skips (the stadium's floodlights).
+        n, keep = _run_pairs(0, cell_start[dims[0] * dims[1] * dims[2]], hot, lf, j, lm, typ,
+                             vis, pair_obj, pair_p, n, keep, model, w_obj, w_int)
+        c = (1, 0, 0, 0, 0, 0)  # no column left to walk
     # The walk of _column_run written out: through the helper this loop ran ~10% slower
     # (measured at (100k, 10k)), and it is the hottest loop of a frame.
     for x in range(c[0], c[3] + 1):
@@ -438,31 +442,54 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
             if z1 < z0:
                 continue
             base = (x * dims[1] + y) * dims[2]
-            # The objects centred in a column of cells are one run of positions. The range
-            # test (exact, DESIGN's d2 <= r*r) compacts the survivors without branching (a
-            # test that fails at random would mispredict); the rest runs on survivors only.
-            v0 = cell_start[base + z0]
-            v1 = cell_start[base + z1 + 1]
-            if v1 - v0 > keep[0].shape[0]:
-                keep = (np.empty(2 * (v1 - v0), np.int32), np.empty(2 * (v1 - v0)))
-            kept, kept_d2 = keep
-            m = 0
-            for v in range(v0, v1):
-                d2 = box_d2(vis_box, v, p0, p1, p2)
-                kept[m] = v
-                kept_d2[m] = d2
-                m += d2 <= rr_exact
-            for i in range(m):
-                n = _exact_pair(hot, lf, j, lm, typ, kept[i], kept_d2[i], vis, pair_obj,
-                                pair_p, n, model, w_obj, w_int)
+            # The objects centred in a column of cells are one run of positions.
+            n, keep = _run_pairs(cell_start[base + z0], cell_start[base + z1 + 1], hot, lf, j,
+                                 lm, typ, vis, pair_obj, pair_p, n, keep, model, w_obj, w_int)
+    r = hot[j, 3]
+    rr_exact = r * r
     for b in range(big_pos.shape[0]):
         v = big_pos[b]
-        d2 = box_d2(vis_box, v, p0, p1, p2)
+        d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
         if d2 <= rr_exact:
             n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis, pair_obj, pair_p, n, model, w_obj,
                             w_int)
     count[t] = n - offsets[t]
     return keep
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis, pair_obj, pair_p, n, keep, model, w_obj,
+               w_int):
+    """The pairs of light j with the objects at positions v0..v1-1, appended at n: the
+    range test (exact, DESIGN's d2 <= r*r) compacts the survivors and their d2 into ``keep``
+    without branching (a test that fails at random would mispredict); the rest of Affects
+    and P run on survivors only. Returns (new n, keep, regrown when short)."""
+    vis_box = vis[0]
+    p0 = hot[j, 0]
+    p1 = hot[j, 1]
+    p2 = hot[j, 2]
+    r = hot[j, 3]
+    rr_exact = r * r
+    if v1 - v0 > keep[0].shape[0]:
+        keep = (np.empty(2 * (v1 - v0), np.int32), np.empty(2 * (v1 - v0)))
+    kept, kept_d2 = keep
+    m = 0
+    for v in range(v0, v1):
+        d2 = box_d2(vis_box, v, p0, p1, p2)
+        kept[m] = v
+        kept_d2[m] = d2
+        m += d2 <= rr_exact
+    for i in range(m):
+        n = _exact_pair(hot, lf, j, lm, typ, kept[i], kept_d2[i], vis, pair_obj, pair_p, n,
+                        model, w_obj, w_int)
+    return n, keep
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _sweeps(c, dims):
+    """Whether a light whose cell range is c covers more than half the grid's columns: it
+    is kept out of the column walk and tests every object in one run."""
+    return (c[3] - c[0] + 1) * (c[4] - c[1] + 1) * 2 > dims[0] * dims[1]
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
