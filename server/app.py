@@ -4,16 +4,23 @@ Bodies are read as bytes and decoded by Content-Type (application/msgpack, or
 application/json for debugging); responses follow Accept (else the request's encoding,
 else JSON). Every refusal is a problem document (RFC 9457) in the response's encoding, with
 a 4xx status; a frame that fails changes nothing in its session.
+
+The two hot routes, ``POST /v1/sessions/{sid}/frames`` and the stream, are FastAPI routes
+(for /docs and OpenAPI) whose endpoints App.__call__ also calls directly: a frame skips
+FastAPI's middleware stack, router and dependency solving (~100 us of Python per request),
+and App does what those would do for it (problem documents, the 500, request metrics).
 """
 
 from __future__ import annotations
 
+import re
 import time
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.openapi.utils import get_openapi
-from fastapi.responses import Response
+from fastapi.responses import PlainTextResponse, Response
 from lightsched_client.wire import (
     JSON,
     MSGPACK,
@@ -59,10 +66,74 @@ def key_of(headers: Any, settings: Settings) -> str | None:
     return key.strip()
 
 
+FRAMES_ROUTE = "/v1/sessions/{sid}/frames"
+STREAM_ROUTE = "/v1/sessions/{sid}/stream"
+# What Starlette's "{sid}" matches: one non-empty path segment.
+_FRAMES = re.compile(r"/v1/sessions/([^/]+)/frames")
+_STREAM = re.compile(r"/v1/sessions/([^/]+)/stream")
+
+
+def _route_path(scope: dict[str, Any]) -> str:
+    """The path the router matches (Starlette's get_route_path: without the root path)."""
+    path: str = scope["path"]
+    root = scope.get("root_path", "")
+    if root and path.startswith(root) and (len(path) == len(root) or path[len(root)] == "/"):
+        return path[len(root):]
+    return path
+
+
+class App(FastAPI):
+    """FastAPI, with the frame route and the stream dispatched before its middleware stack
+    to their endpoints (set by create_app)."""
+
+    hot_frame: Callable[[Request, str], Awaitable[Response]] | None = None
+    hot_stream: Callable[[WebSocket, str], Awaitable[None]] | None = None
+    on_problem: Callable[[Request, Problem], Response] | None = None
+    metrics: Any = None
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        kind = scope["type"]
+        if kind == "http" and scope["method"] == "POST" and self.hot_frame is not None:
+            m = _FRAMES.fullmatch(_route_path(scope))
+            if m is not None:
+                await self._frame(scope, receive, send, m.group(1))
+                return
+        elif kind == "websocket" and self.hot_stream is not None:
+            m = _STREAM.fullmatch(_route_path(scope))
+            if m is not None:
+                scope["app"] = self
+                await self.hot_stream(WebSocket(scope, receive, send), m.group(1))
+                return
+        await super().__call__(scope, receive, send)
+
+    async def _frame(self, scope: Any, receive: Any, send: Any, sid: str) -> None:
+        """What the middleware stack does around the frame endpoint: Problem -> its
+        document, anything else -> 500 (re-raised for the server's log), and the request
+        metrics (Observe)."""
+        assert self.hot_frame is not None and self.on_problem is not None
+        t = time.perf_counter()
+        scope["app"] = self
+        request = Request(scope, receive)
+        status = 500
+        try:
+            try:
+                response = await self.hot_frame(request, sid)
+            except Problem as p:
+                response = self.on_problem(request, p)
+            status = response.status_code
+            await response(scope, receive, send)
+        except Exception:
+            if status == 500:  # nothing sent yet: ServerErrorMiddleware's answer
+                await PlainTextResponse("Internal Server Error", 500)(scope, receive, send)
+            raise
+        finally:
+            self.metrics.observe_request(FRAMES_ROUTE, status, time.perf_counter() - t)
+
+
 def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
     """The ASGI app. ``demo`` preloads a session with id "demo" holding the demo city."""
     service = Service(settings or Settings.from_env())
-    app = FastAPI(title="LightSched", version=lightsched.__version__,
+    app = App(title="LightSched", version=lightsched.__version__,
                   description="Per-object light sets, fades and shadow casters for real-time "
                               "renderers. Bodies are application/msgpack (or application/json "
                               "for debugging); see schemas/wire.md.")
@@ -154,7 +225,7 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         service.delete_session(sid, key_of(request.headers, cfg))
         return Response(status_code=204)
 
-    @app.post("/v1/sessions/{sid}/frames", tags=["frames"], openapi_extra=_body("frame_request"),
+    @app.post(FRAMES_ROUTE, tags=["frames"], openapi_extra=_body("frame_request"),
               responses=_answers("frame"))
     async def frame(request: Request, sid: str) -> Response:
         """Scene changes (set / update / remove of lights and objects, in order, all or
@@ -175,7 +246,7 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
                                              f"encode;dur={(t3 - t2) * 1e3:.3f}")
         return response
 
-    @app.websocket("/v1/sessions/{sid}/stream")
+    @app.websocket(STREAM_ROUTE)
     async def stream(ws: WebSocket, sid: str) -> None:
         """One frame request per message (binary: msgpack, text: JSON), one frame or problem
         document back per message, in order."""
@@ -227,6 +298,8 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+    app.hot_frame, app.hot_stream, app.on_problem = frame, stream, problem
+    app.metrics = service.metrics
     if demo:
         from lightsched.scenes import demo_scene
 
@@ -295,15 +368,18 @@ def serve(host: str = "127.0.0.1", port: int = 8080, demo: bool = True,
     print(f"LightSched {lightsched.__version__} on http://{host}:{port} "
           f"(docs: http://{host}:{port}/docs"
           + (", demo session id 'demo'" if demo else "") + ")", flush=True)
-    uvicorn.run(app, **uvicorn_options(settings), host=host, port=port, log_level=log_level)
+    uvicorn.run(app, **uvicorn_options(settings, log_level), host=host, port=port)
 
 
-def uvicorn_options(settings: Settings) -> dict[str, Any]:
+def uvicorn_options(settings: Settings, log_level: str = "warning") -> dict[str, Any]:
     """uvicorn settings the service relies on: the C HTTP parser and event loop, messages
     as large as bodies, and no permessage-deflate (arrays barely compress, and deflating a
-    frame costs more than sending it)."""
+    frame costs more than sending it). The access log is on only where its lines are
+    printed (log level info or below): uvicorn formats a line's arguments before the
+    logger drops it, a few microseconds per request."""
     return {"http": "httptools", "loop": "uvloop", "ws_max_size": settings.max_body_bytes,
-            "ws_per_message_deflate": False}
+            "ws_per_message_deflate": False, "log_level": log_level,
+            "access_log": log_level.lower() in ("trace", "debug", "info")}
 
 
 class ServerThread:
@@ -323,7 +399,7 @@ class ServerThread:
             sock.bind(("127.0.0.1", 0))
             self.port = sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}"
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning",
+        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.port,
                                 **uvicorn_options(self.settings))
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)

@@ -4,6 +4,7 @@ latency histograms, request latency, sessions, and responses by status."""
 from __future__ import annotations
 
 import threading
+from bisect import bisect_left
 from collections import defaultdict
 from typing import Any
 
@@ -17,10 +18,8 @@ class Histogram:
         self.total = 0.0
 
     def observe(self, value: float) -> None:
-        i = 0
-        while i < len(BUCKETS) and value > BUCKETS[i]:
-            i += 1
-        self.counts[i] += 1
+        # The first bucket with value <= bound (le), else +Inf.
+        self.counts[bisect_left(BUCKETS, value)] += 1
         self.total += value
 
     def lines(self, name: str, labels: str) -> list[str]:
@@ -45,10 +44,11 @@ class Metrics:
         self.latency: dict[str, Histogram] = defaultdict(Histogram)
 
     def observe_frame(self, stats: dict[str, Any]) -> None:
+        stages = self.stages
         with self._lock:
             self.frames += 1
             for stage, seconds in stats.get("seconds", {}).items():
-                self.stages[stage].observe(float(seconds))
+                stages[stage].observe(float(seconds))
 
     def observe_request(self, route: str, status: int, seconds: float) -> None:
         with self._lock:

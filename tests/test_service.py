@@ -286,6 +286,36 @@ def test_malformed_wrong_types_and_media(server):
         assert c.call("GET", f"/v1/sessions/{sid}")["frame_index"] == 0
 
 
+def test_frame_route_outside_fastapi_keeps_its_behaviour(server):
+    """POST .../frames and the stream skip FastAPI's stack (lightsched_server.app.App): the
+    answer's headers, the request metrics and the routes FastAPI still serves on the same
+    paths are as before."""
+    sid = session_id(server)
+    path = f"/v1/sessions/{sid}/frames"
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=30)
+    conn.request("POST", path, body=dumps({"cameras": [camera_doc(SCENE.cameras[0])]}, MSGPACK),
+                 headers={"Content-Type": MSGPACK, "Accept": MSGPACK})
+    r = conn.getresponse()
+    data = r.read()
+    conn.close()
+    names = [k.lower() for k, _ in r.getheaders()]
+    assert r.status == 200 and r.getheader("content-type") == MSGPACK
+    assert names[-3:] == ["content-length", "content-type", "server-timing"]
+    assert int(r.getheader("content-length")) == len(data)
+    assert [p.split(";")[0] for p in r.getheader("server-timing").split(", ")] == \
+        ["decode", "frame", "encode"]
+    status, ctype, doc = raw(server, "POST", "/v1/sessions/nope/frames",
+                             dumps({"cameras": []}, MSGPACK), {"Content-Type": MSGPACK})
+    assert (status, ctype, doc["instance"]) == (404, "application/problem+msgpack",
+                                                "/v1/sessions/nope/frames")
+    text = raw(server, "GET", "/metrics")[2]
+    assert 'lightsched_requests_total{route="/v1/sessions/{sid}/frames",status="200"}' in text
+    assert 'lightsched_requests_total{route="/v1/sessions/{sid}/frames",status="404"}' in text
+    # Other methods and near-miss paths are FastAPI's, as before.
+    assert raw(server, "PUT", path, headers={"Accept": JSON})[0] == 405
+    assert raw(server, "POST", f"/v1/sessions/{sid}/frames/x", b"", {"Accept": JSON})[0] == 404
+
+
 def test_unknown_session_is_404(server):
     with Client(server.url) as c:
         for method in ("GET", "DELETE"):
@@ -380,7 +410,7 @@ def test_api_keys_guard_and_separate_sessions():
         srv.stop()
 
 
-def test_concurrent_frames_on_one_session_run_in_order(server, limited):
+def test_concurrent_frames_on_one_session_run_in_order(server, limited, monkeypatch):
     cam = camera_doc(SCENE.cameras[0])
 
     async def burst(url, n, pending_ok):
@@ -413,7 +443,15 @@ def test_concurrent_frames_on_one_session_run_in_order(server, limited):
     for r in results:
         assert np.array_equal(r["fade_weight"], want[r["frame_index"] - 1].fade_weight)
     # With at most 2 waiting, a burst of 12 gets some 429s, never a 5xx, and the session
-    # counts exactly the frames it answered.
+    # counts exactly the frames it answered. Each frame takes 0.1 s more (in its worker
+    # thread: small_scene=0), so the burst queues up however fast the core and the routes are.
+    run_frame = limited.service._run_frame
+
+    def slow_frame(*args):
+        time.sleep(0.1)
+        return run_frame(*args)
+
+    monkeypatch.setattr(limited.service, "_run_frame", slow_frame)
     results, info = asyncio.run(burst(limited.url, 12, False))
     ok = [r for r in results if isinstance(r, dict)]
     refused = [r for r in results if isinstance(r, RemoteError)]

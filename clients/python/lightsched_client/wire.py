@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import json
+import sys
 from typing import Any
 
 import msgpack
@@ -27,6 +28,12 @@ VERSION = "v1"
 DTYPES = ("bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
           "float32", "float64")
 ARRAY_KEYS = frozenset(("dtype", "shape", "data"))
+# The fast paths below (msgpack only) skip what a native little-endian C-order array or a
+# well-formed array map does not need: dtype.name (~2 us), np.prod (~6 us), a copy. Anything
+# else takes the general code, which gives the same bytes and the same errors.
+_LITTLE = sys.byteorder == "little"
+_NAME_OF = {np.dtype(n): n for n in DTYPES} if _LITTLE else {}
+_NATIVE = {n: np.dtype(n) for n in DTYPES} if _LITTLE else {}
 
 
 class WireError(ValueError):
@@ -47,6 +54,46 @@ def encode_array(a: np.ndarray, binary: bool) -> dict[str, Any]:
     data = memoryview(c.reshape(-1).view(np.uint8)) if c.size else b""
     return {"dtype": a.dtype.name, "shape": list(a.shape),
             "data": data if binary else base64.b64encode(data).decode("ascii")}
+
+
+def _packable(value: Any) -> Any:
+    """msgpack's ``default`` hook: what msgpack cannot pack by itself, in its wire form
+    (numpy arrays and scalars; the same bytes as packing ``to_wire(doc, True)``)."""
+    if isinstance(value, np.ndarray):
+        name = _NAME_OF.get(value.dtype)
+        if name is None or not value.flags.c_contiguous:
+            return encode_array(value, True)
+        return {"dtype": name, "shape": list(value.shape),
+                "data": memoryview(value if value.ndim == 1 else value.reshape(-1)).cast("B")
+                if value.size else b""}
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot serialize {type(value).__name__}")
+
+
+class _NotFast(Exception):
+    """An array map the fast decoder leaves to decode_array (which names the error)."""
+
+
+def _array_hook(doc: dict[str, Any]) -> Any:
+    """msgpack's ``object_hook``: a well-formed array map into its (read-only) array, as
+    decode_array makes it; anything else about an array map raises _NotFast."""
+    if len(doc) != 3 or "data" not in doc or "dtype" not in doc or "shape" not in doc:
+        return doc
+    dtype, shape, data = doc["dtype"], doc["shape"], doc["data"]
+    if type(dtype) is not str or type(shape) is not list or type(data) is not bytes:
+        raise _NotFast
+    dt = _NATIVE.get(dtype)
+    if dt is None:
+        raise _NotFast
+    count = 1
+    for n in shape:
+        if type(n) is not int or n < 0:
+            raise _NotFast
+        count *= n
+    if len(data) != count * dt.itemsize:
+        raise _NotFast
+    return np.frombuffer(data, dtype=dt).reshape(shape)
 
 
 def is_array_doc(value: Any) -> bool:
@@ -112,6 +159,8 @@ def media_type(content_type: str | None) -> str | None:
 def dumps(doc: Any, kind: str) -> bytes:
     """Encodes a message (numpy arrays allowed inside) as msgpack or JSON bytes."""
     if kind == MSGPACK:
+        if _LITTLE:
+            return msgpack.packb(doc, use_bin_type=True, default=_packable)
         return msgpack.packb(to_wire(doc, True), use_bin_type=True)
     return json.dumps(to_wire(doc, False), separators=(",", ":"), allow_nan=False).encode()
 
@@ -119,6 +168,14 @@ def dumps(doc: Any, kind: str) -> bytes:
 def loads(body: bytes, kind: str) -> Any:
     """Decodes msgpack or JSON bytes into maps, lists and numpy arrays; WireError if
     malformed."""
+    if kind == MSGPACK and _LITTLE:
+        try:
+            return msgpack.unpackb(body, raw=False, strict_map_key=True, object_hook=_array_hook)
+        except _NotFast:
+            pass  # a bad (or unusual) array map: the general path below names it
+        except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError,
+                TypeError):
+            pass  # malformed: the same error from the general path
     try:
         if kind == MSGPACK:
             doc = msgpack.unpackb(body, raw=False, strict_map_key=True)
