@@ -326,9 +326,6 @@ def light_bounds(hot, rows, grid, n_vis):
             out[t] = n_vis
             continue
         c = _light_cells(hot, j, g_f, dims, ext)
-        if _sweeps(c, dims):
-            out[t] = n_vis
-            continue
         total = big_pos.shape[0]
         # The whole cube, not the sphere cut: a looser bound is cheaper to count.
         for x in range(c[0], c[3] + 1):
@@ -425,13 +422,6 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
         return keep
     c = _light_cells(hot, j, g_f, dims, ext)
     rr = _reach2(hot, j)
-    if _sweeps(c, dims):
-        # A light over most of the grid scans every object in one run: the per-column
-        # walk would cost more than the objects it skips (the stadium's floodlights).
-        n, keep = _run_pairs(0, cell_start[dims[0] * dims[1] * dims[2]], hot, lf, j, lm, typ,
-                             vis_box, vis_bits, vis_rows, pair_obj, pair_p, n, keep, model,
-                             w_obj, w_int)
-        c = (1, 0, 0, 0, 0, 0)  # no column left to walk
     # The walk of _column_run written out: through the helper this loop ran ~10% slower
     # (measured at (100k, 10k)), and it is the hottest loop of a frame.
     for x in range(c[0], c[3] + 1):
@@ -490,12 +480,6 @@ def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_ob
                         pair_obj, pair_p, n, model, w_obj, w_int)
     return n, keep
 
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _sweeps(c, dims):
-    """Whether a light whose cell range is c covers more than half the grid's columns: it
-    is kept out of the column walk and tests every object in one run."""
-    return (c[3] - c[0] + 1) * (c[4] - c[1] + 1) * 2 > dims[0] * dims[1]
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
