@@ -68,6 +68,10 @@ CELL_PER_RADIUS = 1.0
 # An incremental frame beyond this share of changed lights or objects costs about what a
 # full one does: run the full frame.
 FULL_SHARE = 0.5
+# "fast" precision keeps its float32 records relative to an origin, the first camera's
+# position when they were made, until that camera is this far from it (metres): within
+# 2^8 m of the origin, coordinates on the 2^-16 m grid are exact in float32's 24 bits.
+REANCHOR = 256.0
 
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
@@ -125,6 +129,9 @@ class _Cache:
     shadows_settled: bool
     frame: Frame
     casters: dict[int, tuple[np.ndarray, np.ndarray]]   # light row -> (object rows, masks)
+    # The origin of the object records and packed lights: 0 (exact precision) or, in
+    # "fast" precision, the first camera's position when they were made.
+    origin: np.ndarray
 
 
 class Scheduler(SceneAPI):
@@ -173,7 +180,7 @@ class Scheduler(SceneAPI):
             splits = cascade_splits(cameras, cfg.cascades, cfg.shadow_distance)
         t = _lap(seconds, "cameras", t)
 
-        why, lrows, orows, orows_cast = self._changes(c, same_cams)
+        why, lrows, orows, orows_cast = self._changes(c, same_cams, frames)
         t = _lap(seconds, "changes", t)
         if why is None:
             assert c is not None
@@ -186,7 +193,7 @@ class Scheduler(SceneAPI):
             plan["frame"] = "full: " + why
         return frame
 
-    def _changes(self, c: _Cache | None, same_cams: bool
+    def _changes(self, c: _Cache | None, same_cams: bool, frames: CameraFrames
                  ) -> tuple[str | None, Any, Any, Any]:
         """(why the frame must be full, or None; changed light rows; object rows whose
         pairs change; object rows whose casts_shadows changed). The rows are None when the
@@ -205,8 +212,10 @@ class Scheduler(SceneAPI):
         why = None
         if not same_cams and cfg.model == "thesis":
             why = "the cameras moved (thesis priorities depend on them)"
-        elif not same_cams and cfg.precision == "fast":
-            why = "the cameras moved (fast precision works relative to the first camera)"
+        elif (not same_cams and cfg.precision == "fast"
+              and np.abs(frames.position[0] - c.origin).max() > REANCHOR):
+            why = (f"the first camera moved over {REANCHOR:g} m from the fast records' origin "
+                   "(they are made again around it)")
         elif lrows.size > FULL_SHARE * max(len(self.lights), 1):
             why = f"{lrows.size} of {len(self.lights)} lights changed"
         elif orows.size > FULL_SHARE * max(len(self.objects), 1):
@@ -244,9 +253,12 @@ class Scheduler(SceneAPI):
         lights, objs = self.lights, self.objects
         n, n_l = len(objs), len(lights)
         # Object records and packed lights: world float64 (exact), or float32 relative to
-        # the first camera ("fast": half the bytes a record; the arithmetic stays float64).
+        # the first camera's position ("fast": half the bytes a record; the arithmetic
+        # stays float64), kept while that camera stays within REANCHOR of it.
         fast = cfg.precision == "fast"
-        rec_frame = (frames.position[0].copy() if fast else np.zeros(3), fast)
+        origin = np.zeros(3) if not fast else (
+            c.origin if c is not None and not full else frames.position[0].copy())
+        rec_frame = (origin, fast)
 
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
@@ -418,7 +430,7 @@ class Scheduler(SceneAPI):
             frames=frames, splits=splits, vis_l=vis_l, vis_o=vis_o, box=box, compete=compete,
             packed=packed, grid=grid, seg=seg, heap=heap, used=used, live=live,
             shadow_of_row=shadow_of_row, fading=fading, shadows_settled=settled, frame=frame,
-            casters=kept_casters)
+            casters=kept_casters, origin=origin)
         if not full:
             why = [f"{lrows.size} lights and {orows.size} objects changed",
                    "cameras " + ("unchanged" if same_cams else "moved")]
@@ -431,7 +443,8 @@ class Scheduler(SceneAPI):
             plan["frame"] = "incremental: " + ", ".join(why)
         plan["visibility"] = f"frustum planes, {len(frames)} camera(s)"
         plan["priority"] = cfg.model + (
-            " (fast: float32 object records relative to the first camera, float64 arithmetic)"
+            " (fast: float32 object records relative to the first camera's position, re-anchored "
+            f"beyond {REANCHOR:g} m; float64 arithmetic)"
             if fast else " (exact float64)")
         plan["fade"] = "fused with selection in the object pass"
         plan["shadows"] = (f"{shadow_rows.size} of {int(candidate.sum())} candidates shadowed "

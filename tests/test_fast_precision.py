@@ -49,16 +49,41 @@ def test_fast_equals_exact_on_the_grid_near_the_first_camera(seed, cfg, offset):
         s.set_lights(**lights)
         s.set_objects(**objects)
     rng = np.random.default_rng(seed)
-    for i in range(3):
+    for i in range(4):
         if i:
             rows = rng.choice(110, 20, replace=False)
             lights["position"][rows] += _on_grid(rng.normal(0, 2.0, (20, 3)))
             for s in (exact, fast):
                 s.update_lights(id=lights["id"][rows], position=lights["position"][rows])
+        if i == 3:
+            # A camera step on the grid: the records keep their origin (incremental frame).
+            cam = cams[0]
+            cams = [ls.Camera(position=cam.position + _on_grid([1.5, 0.25, -2.0]),
+                              forward=cam.forward, up=cam.up, fov_y=cam.fov_y,
+                              aspect=cam.aspect, near=cam.near, far=cam.far, focus=cam.focus)]
         fe = exact.frame(cams, dt=1 / 30)
         ff = fast.frame(cams, dt=1 / 30)
         frames_identical(ff, fe, f"frame {i}")
         assert "fast" in ff.stats["plan"]["priority"], ff.stats["plan"]
+        if i == 3 and cfg.model == "contribution":  # thesis P follows the camera: full
+            assert not ff.stats["plan"]["frame"].startswith("full"), ff.stats["plan"]
+
+
+def test_fast_records_are_made_again_when_the_camera_goes_far():
+    lights, objects, cams = big_scene(9, 150, 90)
+    s = ls.Scheduler(ls.Config(precision="fast", max_lights=4))
+    s.set_lights(**lights)
+    s.set_objects(**objects)
+    s.frame(cams)
+    cam = cams[0]
+    for step, full in ((10.0, False), (300.0, True)):
+        moved = ls.Camera(position=cam.position + [step, 0.0, 0.0], forward=cam.forward,
+                          up=cam.up, fov_y=cam.fov_y, aspect=cam.aspect, near=cam.near,
+                          far=cam.far + 400.0)
+        f = s.frame([moved])
+        assert f.stats["plan"]["frame"].startswith("full: the first camera moved") == full, \
+            f.stats["plan"]
+        assert_frame_sane(f, 4, f"camera + {step} m")
 
 
 def test_fast_on_a_city_is_close_to_exact():
