@@ -424,10 +424,21 @@ class LightStore:
     @staticmethod
     def validate(given: dict[str, Any], base: dict[str, np.ndarray] | None, n: int
                  ) -> dict[str, np.ndarray]:
-        """Checks the fields in table order; ``base`` holds current rows for an update."""
+        """Checks the fields in table order; ``base`` holds current rows for an update.
+
+        In an update, a rule runs only when one of the fields it reads was given: the
+        stored rows passed every rule when they were written, so a rule over stored values
+        alone cannot fail, and the first failing rule is the same as with every rule run
+        (an update of positions only was 42 us of validation for 100 lights, most of a
+        service frame's ``update_lights``)."""
         unknown = [k for k in given if k not in LIGHT_FIELDS]
         if unknown:
             raise ValidationError(unknown[0], None, "unknown light field")
+        sent = {k for k, v in given.items() if v is not None}
+
+        def due(*reads: str) -> bool:
+            return base is None or not sent.isdisjoint(reads)
+
         cols: dict[str, np.ndarray] = {}
         kinds = {"id": "i", "type": "i", "position": "f", "radius": "f", "direction": "f",
                  "outer_angle": "f", "inner_angle": "f", "intensity": "f", "priority": "f",
@@ -444,19 +455,20 @@ class LightStore:
                 t = cols.get("type")
                 if t is None:
                     t = cols["type"] = np.zeros(n, np.uint8)
-                bad = _first_bad((t < 0) | (t > 2))
-                if bad is not None:
-                    raise ValidationError("type", bad, "unknown light type (0 point, 1 spot, 2 directional)")
-                cols["type"] = t.astype(np.uint8)
+                if due("type"):
+                    bad = _first_bad((t < 0) | (t > 2))
+                    if bad is not None:
+                        raise ValidationError("type", bad, "unknown light type "
+                                              "(0 point, 1 spot, 2 directional)")
+                    cols["type"] = t.astype(np.uint8)
             elif name in ("position", "radius"):
-                needs = cols["type"] != DIRECTIONAL
                 if name not in cols:
-                    bad = _first_bad(needs)
+                    bad = _first_bad(cols["type"] != DIRECTIONAL)
                     if bad is not None:
                         raise ValidationError(name, bad, "required for point and spot lights")
                     cols[name] = np.zeros((n, 3)) if name == "position" else np.zeros(n)
-                if name == "radius":
-                    bad = _first_bad(needs & ~(cols["radius"] > 0.0))
+                if name == "radius" and due("type", "radius"):
+                    bad = _first_bad((cols["type"] != DIRECTIONAL) & ~(cols["radius"] > 0.0))
                     if bad is not None:
                         raise ValidationError("radius", bad, "must be > 0 on point and spot lights")
             elif name == "direction":
@@ -467,43 +479,51 @@ class LightStore:
                         raise ValidationError("direction", bad, "required for spot and directional lights")
                     cols["direction"] = np.zeros((n, 3))
                 d = cols["direction"]
-                # Judged by |d| = sqrt(x*x + y*y + z*z): a length that under- or overflows
-                # cannot be normalised (rows that ignore direction keep it as given).
-                norm = _norm3(d)
-                bad = _first_bad(needs & ~((norm > 0.0) & (norm < np.inf)))
-                if bad is not None:
-                    raise ValidationError("direction", bad, "must have a non-zero length that "
-                                          "sqrt(x*x + y*y + z*z) can represent")
+                if due("type", "direction"):
+                    # Judged by |d| = sqrt(x*x + y*y + z*z): a length that under- or
+                    # overflows cannot be normalised (rows that ignore direction keep it
+                    # as given).
+                    norm = _norm3(d)
+                    bad = _first_bad(needs & ~((norm > 0.0) & (norm < np.inf)))
+                    if bad is not None:
+                        raise ValidationError("direction", bad, "must have a non-zero length "
+                                              "that sqrt(x*x + y*y + z*z) can represent")
                 if "direction" in given:
                     cols["direction"] = _normalise(d)
             elif name == "outer_angle":
                 if "outer_angle" not in cols:
                     cols["outer_angle"] = np.full(n, math.pi / 4)
                 o = cols["outer_angle"]
-                bad = _first_bad((cols["type"] == SPOT) & ~((o > 0.0) & (o < math.pi / 2)))
-                if bad is not None:
-                    raise ValidationError("outer_angle", bad, "must be in (0, pi/2) on spot lights")
+                if due("type", "outer_angle"):
+                    bad = _first_bad((cols["type"] == SPOT) & ~((o > 0.0) & (o < math.pi / 2)))
+                    if bad is not None:
+                        raise ValidationError("outer_angle", bad, "must be in (0, pi/2) on spot lights")
             elif name == "inner_angle":
                 if "inner_angle" not in cols:
                     cols["inner_angle"] = 0.8 * cols["outer_angle"]
                 inner = cols["inner_angle"]
-                bad = _first_bad((cols["type"] == SPOT)
-                                 & ~((inner >= 0.0) & (inner <= cols["outer_angle"])))
-                if bad is not None:
-                    raise ValidationError("inner_angle", bad, "must be in [0, outer_angle] on spot lights")
+                if due("type", "outer_angle", "inner_angle"):
+                    bad = _first_bad((cols["type"] == SPOT)
+                                     & ~((inner >= 0.0) & (inner <= cols["outer_angle"])))
+                    if bad is not None:
+                        raise ValidationError("inner_angle", bad,
+                                              "must be in [0, outer_angle] on spot lights")
             elif name == "intensity":
                 if "intensity" not in cols:
                     cols["intensity"] = np.ones(n)
-                bad = _first_bad(cols["intensity"] < 0.0)
-                if bad is not None:
-                    raise ValidationError("intensity", bad, "must be >= 0")
+                if due("intensity"):
+                    bad = _first_bad(cols["intensity"] < 0.0)
+                    if bad is not None:
+                        raise ValidationError("intensity", bad, "must be >= 0")
             elif name == "priority":
                 cols.setdefault("priority", np.zeros(n))
             elif name == "shadows":
                 cols.setdefault("shadows", np.zeros(n, np.bool_))
             elif name == "mask":
-                cols["mask"] = (_check_mask("mask", cols["mask"]) if "mask" in cols
-                                else np.full(n, UINT32_MAX, np.uint32))
+                if "mask" not in cols:
+                    cols["mask"] = np.full(n, UINT32_MAX, np.uint32)
+                elif due("mask"):
+                    cols["mask"] = _check_mask("mask", cols["mask"])
         return cols
 
     def assign(self, cols: dict[str, np.ndarray]) -> None:

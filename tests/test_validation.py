@@ -1110,3 +1110,61 @@ def test_first_nonfinite_field_in_table_order(cls, data, hits):
     sch = cls()
     sch.set_lights(id=[99], position=[[1, 2, 3]], radius=[4])
     rejects(sch, sch.set_lights, field, row, **kw)
+
+
+# Values each light field may get in an update: valid ones and every kind of bad one.
+UPDATE_VALUES = {
+    "type": [-1, 0, 1, 2, 3],
+    "position": [NAN, -INF, -3.0, 0.0, 7.5],
+    "radius": [NAN, INF, -1.0, 0.0, 0.5, 20.0],
+    "direction": [NAN, INF, 0.0, 1e-200, 1e200, -1.0, 0.3],
+    "outer_angle": [NAN, -0.1, 0.0, 0.3, 0.6, 1.5, 1.6],
+    "inner_angle": [NAN, -0.1, 0.0, 0.3, 0.6, 0.9],
+    "intensity": [NAN, INF, -1.0, 0.0, 2.0],
+    "priority": [NAN, -5.0, 0.0, 3.0],
+    "shadows": [0, 1, 2],
+    "mask": [-1, 0, 5, UINT32_ALL, UINT32_ALL + 1],
+}
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_update_runs_only_the_rules_of_given_fields(data):
+    """An update checks only the rules that read a given field (LightStore.validate); the
+    stored rows passed them all, so the outcome equals running every rule on the merged
+    rows: the same first error (field, index, message), or the same columns."""
+    from lightsched.scene import LightStore
+
+    s = ls.Scheduler()
+    s.set_lights(**light_kwargs())
+    rows = data.draw(st.lists(st.integers(0, N_L - 1), min_size=1, max_size=N_L, unique=True))
+    base = s.lights.columns(np.array(rows))
+    n = len(rows)
+    names = data.draw(st.lists(st.sampled_from(sorted(UPDATE_VALUES)), min_size=1, unique=True))
+    given_fields = {}
+    for name in names:
+        width = 3 if name in ("position", "direction") else 0
+        cells = data.draw(st.lists(st.sampled_from(UPDATE_VALUES[name]),
+                                   min_size=n * max(width, 1), max_size=n * max(width, 1)))
+        a = np.array(cells)
+        given_fields[name] = a.reshape(n, width) if width else a
+
+    def outcome(given: dict, rows_base: dict | None) -> tuple:
+        try:
+            return ("ok", LightStore.validate(given, rows_base, n))
+        except ValidationError as e:
+            return ("error", (e.field, e.index, e.message))
+
+    got = outcome(dict(given_fields), base)
+    want = outcome({**base, **given_fields}, None)
+    assert got[0] == want[0], (got, want)
+    if got[0] == "error":
+        assert got[1] == want[1]
+        return
+    for f in LIGHT_FIELDS:
+        if f == "direction" and f not in given_fields:
+            # every rule run normalises the stored (unit) directions again: last-bit changes
+            np.testing.assert_allclose(got[1][f], want[1][f], rtol=1e-15, atol=0)
+        else:
+            np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
+            assert got[1][f].dtype == want[1][f].dtype, f
