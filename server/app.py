@@ -134,9 +134,9 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
     """The ASGI app. ``demo`` preloads a session with id "demo" holding the demo city."""
     service = Service(settings or Settings.from_env())
     app = App(title="LightSched", version=lightsched.__version__,
-                  description="Per-object light sets, fades and shadow casters for real-time "
-                              "renderers. Bodies are application/msgpack (or application/json "
-                              "for debugging); see schemas/wire.md.")
+              description="Per-object light sets, fades and shadow casters for real-time "
+                          "renderers. Bodies are application/msgpack (or application/json "
+                          "for debugging); see schemas/wire.md.")
     app.state.service = service
     cfg = service.settings
 
