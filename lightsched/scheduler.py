@@ -259,15 +259,20 @@ class Scheduler(SceneAPI):
         origin = np.zeros(3) if not fast else (
             c.origin if c is not None and not full else frames.position[0].copy())
         rec_frame = (origin, fast)
+        # Object visibility and records depend on the objects, the cameras and the records'
+        # origin only: a full frame (most lights changed) keeps them too when those are as
+        # they were.
+        objects_kept = (c is not None and same_cams and orows is not None and orows.size == 0
+                        and np.array_equal(origin, c.origin))
 
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
                                frames.plane_p)
-        if full or not same_cams or orows.size:
+        if objects_kept:
+            vis_o, box = c.vis_o, c.box
+        else:
             vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
                                          frames.plane_p)
-        else:
-            vis_o, box = c.vis_o, c.box
         t = _lap(seconds, "visibility", t)
 
         if full or lrows.size or (not same_cams and cfg.model != "contribution"):
@@ -289,11 +294,23 @@ class Scheduler(SceneAPI):
             moved[orows] = True
             fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
             left_rows = np.flatnonzero(c.vis_o & ~vis_o)
-        if full or fresh_rows.size or left_rows.size:
+        if full and objects_kept:
+            # The lights set the cell edge: the kept grid serves while it is the same.
+            g_f, dims, plan_kept = _grid_shape(int(np.count_nonzero(vis_o)), box, packed,
+                                               compete, is_dir, rec_frame)
+            grid_kept = (np.array_equal(g_f, c.grid.grid[0])
+                         and np.array_equal(dims, c.grid.grid[1]))
+            grid = (_Grid(c.grid.grid, c.grid.vis, plan_kept or c.grid.plan) if grid_kept
+                    else self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame))
+        elif full or fresh_rows.size or left_rows.size:
+            grid_kept = False
             grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame)
         else:
+            grid_kept = True
             grid = c.grid
         plan["pairs"] = grid.plan
+        if full and grid_kept:
+            plan["pairs"] += " (kept: the objects and cameras did not change)"
         if not compete.any() or not vis_o.any():
             plan["pairs"] = "none: no competing light or no visible object"
         t = _lap(seconds, "grid", t)
@@ -441,7 +458,8 @@ class Scheduler(SceneAPI):
             if cut:
                 why.append("a cut")
             plan["frame"] = "incremental: " + ", ".join(why)
-        plan["visibility"] = f"frustum planes, {len(frames)} camera(s)"
+        plan["visibility"] = f"frustum planes, {len(frames)} camera(s)" + (
+            "; the objects' kept (they and the cameras did not change)" if objects_kept else "")
         plan["priority"] = cfg.model + (
             " (fast: float32 object records relative to the first camera's position, re-anchored "
             f"beyond {REANCHOR:g} m; float64 arithmetic)"
@@ -508,24 +526,11 @@ class Scheduler(SceneAPI):
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                       is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> _Grid:
-        """The selected objects sorted into a grid of cells (edge CELL_PER_RADIUS x the
-        median radius of the competing point and spot lights), with their records in the
-        frame (origin, single) of the packed lights; a single cell when there are few
-        enough pairs for brute force."""
+        """The selected objects sorted into a grid of cells (``_grid_shape``), with their
+        records in the frame (origin, single) of the packed lights."""
         objs = self.objects
-        n_sel = int(np.count_nonzero(select))
-        point_rows = np.flatnonzero(compete & ~is_dir)
-        box = np.zeros(6) if n_sel == 0 else _frame_box(box, frame)
-        if point_rows.size * n_sel <= BRUTE_FORCE_PAIRS:
-            # One cell holding every selected object: each light tests them all.
-            g_f, dims = grid_shape(box[:3], box[3:],
-                                   2.0 * max(float(np.max(box[3:] - box[:3])), 1.0))
-            plan = f"brute force ({int(compete.sum())} lights x {n_sel} objects)"
-        else:
-            radii = packed[0][point_rows, 3]
-            median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
-            g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
-            plan = None
+        g_f, dims, plan = _grid_shape(int(np.count_nonzero(select)), box, packed, compete,
+                                      is_dir, frame)
         grid, recs = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
                                   dims, frame)
         if plan is None:
@@ -701,6 +706,24 @@ def _frame_box(box: np.ndarray, frame: tuple[np.ndarray, bool]) -> np.ndarray:
         pad = np.abs(rel) * 2.0**-22 + 1e-30
         rel = rel + np.concatenate([-pad[:3], pad[3:]])
     return rel
+
+
+def _grid_shape(n_sel: int, box: np.ndarray, packed: tuple[np.ndarray, np.ndarray],
+                compete: np.ndarray, is_dir: np.ndarray, frame: tuple[np.ndarray, bool]
+                ) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """(g_f, dims, plan or None) of the grid of n_sel objects in the world box ``box``:
+    cells of edge CELL_PER_RADIUS x the median radius of the competing point and spot
+    lights, or a single cell when there are few enough pairs for brute force (its plan)."""
+    point_rows = np.flatnonzero(compete & ~is_dir)
+    box = np.zeros(6) if n_sel == 0 else _frame_box(box, frame)
+    if point_rows.size * n_sel <= BRUTE_FORCE_PAIRS:
+        # One cell holding every selected object: each light tests them all.
+        g_f, dims = grid_shape(box[:3], box[3:], 2.0 * max(float(np.max(box[3:] - box[:3])), 1.0))
+        return g_f, dims, f"brute force ({int(compete.sum())} lights x {n_sel} objects)"
+    radii = packed[0][point_rows, 3]
+    median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
+    g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
+    return g_f, dims, None
 
 
 def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,

@@ -195,7 +195,7 @@ def test_structural_changes_run_full_frames():
 
 # --------------------------------------------------------------------------- mixed runs
 
-OPS = ["none", "none", "lights", "objects", "camera", "props", "cut"]
+OPS = ["none", "none", "lights", "objects", "camera", "props", "cut", "every_light"]
 
 
 def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict,
@@ -214,6 +214,12 @@ def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict
         objects["bounds_max"][rows] += d
         t.update_objects(id=objects["id"][rows], bounds_min=objects["bounds_min"][rows],
                          bounds_max=objects["bounds_max"][rows])
+    elif op == "every_light":
+        # A full frame; with the radii scaled the grid's cell edge changes as well.
+        lights["position"] += rng.normal(0, 1.5, (n_l, 3))
+        if rng.uniform() < 0.5:
+            lights["radius"] *= rng.choice([0.5, 2.0])
+        t.update_lights(id=lights["id"], position=lights["position"], radius=lights["radius"])
     elif op == "camera":
         cams = [_moved_camera(cams[0], float(rng.normal(0, 2.0)))]
     elif op == "props":
@@ -278,7 +284,7 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
     # one keeps their origin: after a camera move they round differently, by design.)
     ops = ["none", "lights", "lights", "none", "objects",
            "camera" if precision == "exact" else "none", "props", "none", "cut",
-           "lights"] + ["none"] * 5
+           "lights", "every_light", "none", "every_light"] + ["none"] * 5
     for i, op in enumerate(ops):
         if op == "lights":
             sub = rng.choice(2_000, 200, replace=False)
@@ -293,6 +299,33 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
         seen.add(_plan(fa).split(":")[0])
         frames_identical(fa, fb, f"frame {i} ({op}, {_plan(fa)})")
     assert seen == {"full", "incremental", "unchanged"}, seen
+
+
+def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move():
+    """Every light moving makes a full frame; with the objects and cameras as they were,
+    it keeps their visibility and grid (same bits as a frame that builds them) until the
+    lights' radii change the cell edge or the camera moves."""
+    p = _Pair(ls.Config(max_lights=4))
+    scene = city(3_000, 300, seed=3, shadow_fraction=0.05)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    p.set_lights(**lights)
+    p.set_objects(**scene.objects)
+    cams = list(scene.cameras)
+    plans = []
+    for i, change in enumerate(["none", "move", "move", "radius", "move", "camera", "move"]):
+        if change == "radius":
+            lights["radius"] = lights["radius"] * 1.5
+        elif change == "camera":
+            cams = [_moved_camera(cams[0], 3.0)]
+        if change != "none":
+            lights["position"] = move_lights(lights, i)
+            p.update_lights(id=lights["id"], position=lights["position"],
+                            radius=lights["radius"])
+        fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i} ({change})")
+        assert _plan(fa).startswith("full"), fa.stats["plan"]
+        plans.append("(kept: the objects and cameras did not change)" in fa.stats["plan"]["pairs"])
+    assert plans == [False, True, True, False, True, False, True], plans
 
 
 def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
