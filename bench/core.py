@@ -25,7 +25,7 @@ before ``s.frame(...)`` and not timed, only ``s.frame(...)`` is:
 
 Per size, the scenarios run interleaved run by run (a new Scheduler per run and scenario),
 so their ratios come from the same minutes. A run steps warm-up frames first (not timed; they
-include numba compilation): ``--warmup`` for ``full``, at least 20 for the others, so that
+include numba compilation): ``--warmup`` for ``full`` and ``all``, at least 20 for the others, so that
 the fades started by the first frames (0.25 s = 15 frames) are over. Scenarios other than
 ``full`` and ``all`` run only at N <= ``--incremental-up-to`` (default 100k). Reported per scenario:
 median of the run medians, their spread, p10..p90 of frame time, the median of each stage of
@@ -440,7 +440,7 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
            f"K = {args.max_lights}, default Config (fade on, exact precision, shadow_budget 4). "
            "Only `Scheduler.frame` is timed; the scene change before it is not. Per size the "
            f"scenarios run interleaved: {args.runs} runs (a new Scheduler each) of "
-           f"{args.frames} frames after {args.warmup} warm-up frames (`full`) or "
+           f"{args.frames} frames after {args.warmup} warm-up frames (`full`, `all`) or "
            f"{max(args.warmup, INCREMENTAL_WARMUP)} (the others, so the first frames' fades "
            "are over); \"median\" is the median of the runs' medians, stage times are "
            "medians over all timed frames.", "",
