@@ -12,10 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numba as nb
 import numpy as np
 
-from .frame import row_words
+from .frame import row_words, rows_differ
 from .scene import Camera
 
 
@@ -38,19 +37,6 @@ def same_key(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _differ(x, y, rows, changed):
-    """changed[i] |= row rows[i] of x differs from that row of y (rows < 0: row i)."""
-    for i in range(changed.shape[0]):
-        r = rows[i] if rows.shape[0] else i
-        if changed[i]:
-            continue
-        for w in range(x.shape[1]):
-            if x[r, w] != y[r, w]:
-                changed[i] = True
-                break
-
-
 def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...]
                  ) -> np.ndarray | None:
     """Rows of ``store`` whose ``fields`` (the first is "id") differ from ``last`` (the
@@ -71,7 +57,7 @@ def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...
     for f in fields[1:]:
         a, b = last[f], getattr(store, f)
         if a is not b and a.shape[0]:
-            _differ(row_words(a), row_words(b), np.zeros(0, np.int64) if rows is None
-                    else rows, changed)
+            same = np.zeros(0, np.int64) if rows is None else rows
+            rows_differ(row_words(a), same, row_words(b), same, changed)
     out = np.flatnonzero(changed) if rows is None else rows[changed]
     return out.astype(np.int64)

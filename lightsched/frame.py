@@ -110,18 +110,20 @@ def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> F
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _rows_differ(cur, prev, prev_row, changed):
-    """changed[i] |= row i of cur [N, W] differs from row prev_row[i] of prev (or
-    prev_row[i] < 0: no such row)."""
-    for i in range(cur.shape[0]):
+def rows_differ(x, x_rows, y, y_rows, changed):
+    """changed[i] |= row x_rows[i] of x [., W] differs from row y_rows[i] of y, or
+    y_rows[i] < 0 (no such row); an empty x_rows or y_rows stands for row i. Frames compare
+    rows remapped by id; the change detection of changes.py the rows an update touched."""
+    for i in range(changed.shape[0]):
         if changed[i]:
             continue
-        j = prev_row[i]
-        if j < 0:
+        r = x_rows[i] if x_rows.shape[0] else i
+        s = y_rows[i] if y_rows.shape[0] else i
+        if s < 0:
             changed[i] = True
             continue
-        for w in range(cur.shape[1]):
-            if cur[i, w] != prev[j, w]:
+        for w in range(x.shape[1]):
+            if x[r, w] != y[s, w]:
                 changed[i] = True
                 break
 
@@ -141,7 +143,7 @@ def changed_rows(prev: Frame, cur: Frame, names: tuple[str, ...]) -> np.ndarray:
     changed = np.zeros(n, np.bool_)
     for name in names:
         a, b = row_words(getattr(cur, name)), row_words(getattr(prev, name))
-        _rows_differ(a, b, prev_row, changed)
+        rows_differ(a, np.zeros(0, np.int64), b, prev_row, changed)
     return changed
 
 
