@@ -494,22 +494,30 @@ class Scheduler(SceneAPI):
 
     # ------------------------------------------------------------------ stages
 
-    def _outputs(self, c: _Cache | None, behind_rows: np.ndarray | None, n: int, k: int
+    def _outputs(self, c: _Cache | None, written_rows: np.ndarray | None, n: int, k: int
                  ) -> dict[str, np.ndarray]:
         """Arrays for this frame's per-object outputs (PER_OBJECT but "visible"): every row
-        is written when ``behind_rows`` is None (a full frame), else only those rows are,
+        is written when ``written_rows`` is None (a full frame), else only those rows are,
         the others must be the last frame's. The arrays of the frame before the last are
         taken back when nothing outside holds them any more (a steady scene allocates no
-        output memory) and brought up to date with the rows the last frame changed; else
-        new arrays (copies of the last frame's for an incremental frame)."""
+        output memory) and brought up to date with the rows the last frame changed and this
+        one does not write; else new arrays (copies of the last frame's for an incremental
+        frame)."""
         spare, lag = self._spare if self._spare is not None else (None, None)
         self._spare = None
         if (spare is not None and spare["light_ids"].shape == (n, k)
                 and not held_elsewhere(spare)):
             for arr in spare.values():
                 arr.flags.writeable = True
-            if behind_rows is not None:
+            if written_rows is not None:
                 assert c is not None
+                if lag is not None:
+                    # Rows this frame writes need no copy: with the same lights moving
+                    # frame after frame, that is nearly all of the lag.
+                    behind = np.zeros(n, np.bool_)
+                    behind[lag] = True
+                    behind[written_rows] = False
+                    lag = np.flatnonzero(behind)
                 for name, arr in spare.items():
                     src = getattr(c.frame, name)
                     if lag is None:
@@ -517,7 +525,7 @@ class Scheduler(SceneAPI):
                     else:
                         copy_rows(src.reshape(n, -1), arr.reshape(n, -1), lag)
             return spare
-        if behind_rows is None:
+        if written_rows is None:
             return {name: np.empty((n, k) if PER_OBJECT[name][1] == "NK" else n,
                                    PER_OBJECT[name][0]) for name in _OUT}
         assert c is not None
