@@ -632,9 +632,9 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
     the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
     its own histogram (parallel); within an object the runs follow each other, so the
     order of its lights is the order of ``rows`` whatever the thread count. out = (hist
-    [GROUP_PARTS, N+1] int64 scratch, start [N+1], (P float64 [H], light row int32 [H])),
-    reused buffers; fills start and the pairs (P, light row): one position, two stores per
-    scattered pair."""
+    [GROUP_PARTS, N+1] int32 (int64 from 2^31 pairs) scratch, start [N+1], (P float64 [H],
+    light row int32 [H])), reused buffers; fills start and the pairs (P, light row): one
+    position, two stores per scattered pair."""
     hist, start, (pair_p_out, pair_j_out) = out
     n_l = rows.shape[0]
     n_obj = start.shape[0] - 1

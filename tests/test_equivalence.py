@@ -352,6 +352,32 @@ def test_both_pair_paths_are_exercised():
     t2.frame(cams, plan="brute force")
 
 
+@pytest.mark.parametrize("hist_dtype", [np.int32, np.int64])
+def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
+    """The pair cache is the light-major pairs sorted by object row, each object's lights in
+    the walk's order, with either histogram width (int64 serves from 2^31 pairs)."""
+    from lightsched.pairs import GROUP_PARTS, group_pairs
+
+    rng = np.random.default_rng(3)
+    n_obj, n_l = 500, 37
+    rows = rng.permutation(n_l).astype(np.int32)
+    count = rng.integers(0, 40, n_l)
+    offsets = np.concatenate([[0], np.cumsum(count + rng.integers(0, 5, n_l))])
+    pair_obj = rng.integers(0, n_obj, offsets[-1]).astype(np.int32)
+    pair_p = rng.random(offsets[-1])
+    start = np.empty(n_obj + 1, np.int64)
+    heap = (np.empty(count.sum()), np.empty(count.sum(), np.int32))
+    group_pairs(rows, offsets, count, pair_obj, pair_p,
+                (np.full((GROUP_PARTS, n_obj + 1), 7, hist_dtype), start, heap))
+    seg = [np.arange(offsets[t], offsets[t] + count[t]) for t in range(n_l)]
+    e = np.concatenate(seg)
+    light = np.repeat(rows, count)
+    order = np.argsort(pair_obj[e], kind="stable")
+    assert np.array_equal(start, np.searchsorted(pair_obj[e][order], np.arange(n_obj + 1)))
+    assert np.array_equal(heap[0], pair_p[e][order])
+    assert np.array_equal(heap[1], light[order])
+
+
 def test_grid_with_big_objects_big_lights_and_directional_in_slots():
     """Objects larger than a cell are tested by every light directly; huge lights walk
     every cell; directional lights in slots take every visible object."""
