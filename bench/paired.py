@@ -1,0 +1,128 @@
+"""Paired A/B of the core in one process: the working tree's lightsched against a commit's.
+
+    python bench/paired.py --base HEAD~1                          # full and lights10 at 100k
+    python bench/paired.py --base fdf791a --sizes 1M:100k --scenarios all --frames 10
+
+The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
+and imported under another name, ``lightsched_base``, beside the working tree's
+``lightsched``. Both get a Scheduler on the same scene and the same motion (bench/core.py's
+scenarios), and their frames alternate (A B, then B A, ...), so the minutes when this noisy
+2-core box is slow hit both alike. Reported per (size, scenario): each side's median frame
+time and the median of the per-frame differences (working tree - base) with its quartiles,
+and the stages (``stats["seconds"]``) whose medians moved most. The two schedulers hold two
+copies of the state, so each frame finds a colder cache than it would alone: the absolute
+times are above bench/core.py's, the difference is what this measures.
+
+Use it for changes of a few percent, which separate processes (bench/history.py) cannot
+resolve here: their run medians spread by +-10% from one minute to the next.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import fmt_count, git_commit, machine, parse_sizes, say
+from core import DT, Motion, make_scene, parse_scenarios
+from history import extract, resolve
+
+import lightsched
+
+
+def load_base(path: Path) -> Any:
+    """The package at path/lightsched imported as ``lightsched_base`` (its relative imports
+    resolve inside it, so the two versions do not mix)."""
+    spec = importlib.util.spec_from_file_location(
+        "lightsched_base", path / "lightsched" / "__init__.py",
+        submodule_search_locations=[str(path / "lightsched")])
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["lightsched_base"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
+           seed: int) -> dict[str, Any]:
+    """Frames of both sides alternated; per side the frame times and stage seconds."""
+    scene = make_scene(n, l, seed, True)
+    sides = {}
+    for side, pkg in packages.items():
+        s = pkg.Scheduler(pkg.Config(max_lights=8))
+        s.set_lights(**scene.lights)
+        s.set_objects(**scene.objects)
+        sides[side] = (s, Motion(scenario, scene, seed))
+    warmup = max(warmup, sides["new"][1].warmup_min)
+    times: dict[str, list[float]] = {side: [] for side in sides}
+    stages: dict[str, list[dict[str, float]]] = {side: [] for side in sides}
+    for i in range(warmup + frames):
+        for side in (("new", "base") if i % 2 else ("base", "new")):
+            s, motion = sides[side]
+            # Cameras as mappings: each package checks its own Camera class.
+            cams = [dataclasses.asdict(c) for c in motion.step(s, i)]
+            t0 = time.perf_counter()
+            f = s.frame(cams, dt=DT)
+            t = time.perf_counter() - t0
+            if i >= warmup:
+                times[side].append(t)
+                stages[side].append(dict(f.stats["seconds"]))
+    d = np.array(times["new"]) - np.array(times["base"])
+    return {"n": n, "l": l, "scenario": scenario, "frames": frames,
+            "new_ms": float(np.median(times["new"])) * 1e3,
+            "base_ms": float(np.median(times["base"])) * 1e3,
+            "diff_ms": float(np.median(d)) * 1e3,
+            "diff_q_ms": [float(np.percentile(d, 25)) * 1e3, float(np.percentile(d, 75)) * 1e3],
+            "stages": {side: {k: float(np.median([x.get(k, 0.0) for x in v])) * 1e3
+                              for k in v[0]} for side, v in stages.items()}}
+
+
+def stage_moves(r: dict[str, Any], top: int = 3) -> str:
+    new, base = r["stages"]["new"], r["stages"]["base"]
+    moves = sorted(((new.get(k, 0.0) - base.get(k, 0.0), k) for k in base if k != "total"),
+                   key=lambda x: -abs(x[0]))[:top]
+    return ", ".join(f"{k} {base[k]:.2f} -> {new.get(k, 0.0):.2f}" for _, k in moves)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--base", required=True, help="the commit to compare the working tree with")
+    p.add_argument("--sizes", default="100k:10k", help="N:L pairs (default 100k:10k)")
+    p.add_argument("--scenarios", default="full,lights10",
+                   help="bench/core.py scenarios (default full,lights10)")
+    p.add_argument("--frames", type=int, default=60, help="timed frames per side (default 60)")
+    p.add_argument("--warmup", type=int, default=5,
+                   help="untimed frames first (at least the scenario's own warm-up)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workdir", default=None,
+                   help="where to extract the base (kept, with its numba cache; default a "
+                        "temporary folder)")
+    args = p.parse_args(argv)
+    base = resolve(args.base)
+    with tempfile.TemporaryDirectory() as tmp:
+        workdir = Path(args.workdir) if args.workdir else Path(tmp)
+        packages = {"new": lightsched, "base": load_base(extract(base, workdir))}
+        m = machine()
+        say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); working tree "
+            f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...)")
+        say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
+            "| stages that moved most (base -> working tree, ms) |")
+        say("|---|---|---|---|---|---|---|")
+        for n, l in parse_sizes(args.sizes):
+            for scenario in parse_scenarios(args.scenarios):
+                r = paired(packages, n, l, scenario, args.frames, args.warmup, args.seed)
+                q = r["diff_q_ms"]
+                say(f"| {fmt_count(n)} | {fmt_count(l)} | {scenario} | {r['base_ms']:.2f} "
+                    f"| {r['new_ms']:.2f} | {r['diff_ms']:+.2f} ({q[0]:+.2f}..{q[1]:+.2f}) "
+                    f"| {stage_moves(r)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
