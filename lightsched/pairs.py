@@ -481,7 +481,6 @@ def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_ob
     return n, keep
 
 
-
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def affects_any(lights, rows, grid, vis):
     """Per light of ``rows`` (parallel): whether it affects at least one object of the grid

@@ -296,12 +296,13 @@ class Scheduler(SceneAPI):
             left_rows = np.flatnonzero(c.vis_o & ~vis_o)
         if full and objects_kept:
             # The lights set the cell edge: the kept grid serves while it is the same.
-            g_f, dims, plan_kept = _grid_shape(int(np.count_nonzero(vis_o)), box, packed,
-                                               compete, is_dir, rec_frame)
-            grid_kept = (np.array_equal(g_f, c.grid.grid[0])
-                         and np.array_equal(dims, c.grid.grid[1]))
-            grid = (_Grid(c.grid.grid, c.grid.vis, plan_kept or c.grid.plan) if grid_kept
-                    else self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame))
+            shape = _grid_shape(int(np.count_nonzero(vis_o)), box, packed, compete, is_dir,
+                                rec_frame)
+            grid_kept = (np.array_equal(shape[0], c.grid.grid[0])
+                         and np.array_equal(shape[1], c.grid.grid[1]))
+            grid = (_Grid(c.grid.grid, c.grid.vis, shape[2] or c.grid.plan) if grid_kept
+                    else self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame,
+                                            shape))
         elif full or fresh_rows.size or left_rows.size:
             grid_kept = False
             grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame)
@@ -533,12 +534,14 @@ class Scheduler(SceneAPI):
 
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
-                      is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> _Grid:
-        """The selected objects sorted into a grid of cells (``_grid_shape``), with their
-        records in the frame (origin, single) of the packed lights."""
+                      is_dir: np.ndarray, frame: tuple[np.ndarray, bool],
+                      shape: tuple[np.ndarray, np.ndarray, str | None] | None = None) -> _Grid:
+        """The selected objects sorted into a grid of cells (``_grid_shape``, unless the
+        caller has it as ``shape``), with their records in the frame (origin, single) of the
+        packed lights."""
         objs = self.objects
-        g_f, dims, plan = _grid_shape(int(np.count_nonzero(select)), box, packed, compete,
-                                      is_dir, frame)
+        g_f, dims, plan = shape if shape is not None else _grid_shape(
+            int(np.count_nonzero(select)), box, packed, compete, is_dir, frame)
         grid, recs = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
                                   dims, frame)
         if plan is None:
