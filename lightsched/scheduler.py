@@ -155,7 +155,7 @@ class Scheduler(SceneAPI):
         """A reusable buffer of at least ``size`` elements (grown by half when short), so a
         steady scene allocates no pair memory per frame."""
         buf = self._buffers.get(name)
-        if buf is None or buf.size < size:
+        if buf is None or buf.size < size or buf.dtype != dtype:
             buf = np.empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
             self._buffers[name] = buf
         return buf
@@ -286,7 +286,10 @@ class Scheduler(SceneAPI):
         compete = vis_l & (~is_dir if not cfg.directional_in_slots else True)
         t = _lap(seconds, "pack", t)
 
-        # The grid of visible objects: kept while the visible set and its boxes are.
+        # The grid of visible objects: kept while the visible set and its boxes are. A new
+        # one writes its records over the kept one's (nothing reads those once it is made):
+        # at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap threshold) was mapped
+        # and faulted in again every other frame, the records kernel 20 ms -> ~70 ms.
         if full:
             fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
@@ -302,10 +305,11 @@ class Scheduler(SceneAPI):
                          and np.array_equal(shape[1], c.grid.grid[1]))
             grid = (_Grid(c.grid.grid, c.grid.vis, shape[2] or c.grid.plan) if grid_kept
                     else self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame,
-                                            shape))
+                                            shape, "records"))
         elif full or fresh_rows.size or left_rows.size:
             grid_kept = False
-            grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame)
+            grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame,
+                                      records="records")
         else:
             grid_kept = True
             grid = c.grid
@@ -535,15 +539,19 @@ class Scheduler(SceneAPI):
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                       is_dir: np.ndarray, frame: tuple[np.ndarray, bool],
-                      shape: tuple[np.ndarray, np.ndarray, str | None] | None = None) -> _Grid:
+                      shape: tuple[np.ndarray, np.ndarray, str | None] | None = None,
+                      records: str | None = None) -> _Grid:
         """The selected objects sorted into a grid of cells (``_grid_shape``, unless the
         caller has it as ``shape``), with their records in the frame (origin, single) of the
-        packed lights."""
+        packed lights, written into the scratch buffer named ``records`` if given."""
         objs = self.objects
+        n_sel = int(np.count_nonzero(select))
         g_f, dims, plan = shape if shape is not None else _grid_shape(
-            int(np.count_nonzero(select)), box, packed, compete, is_dir, frame)
+            n_sel, box, packed, compete, is_dir, frame)
+        out = None if records is None else self._scratch(
+            records, 8 * n_sel, np.float32 if frame[1] else np.float64)
         grid, recs = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
-                                  dims, frame)
+                                  dims, frame, out)
         if plan is None:
             plan = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
                     f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {grid[4].size} objects "
@@ -742,15 +750,17 @@ def _grid_shape(n_sel: int, box: np.ndarray, packed: tuple[np.ndarray, np.ndarra
 
 
 def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,
-                 g_f: np.ndarray, dims: np.ndarray, frame: tuple[np.ndarray, bool]
-                 ) -> tuple[tuple, tuple]:
+                 g_f: np.ndarray, dims: np.ndarray, frame: tuple[np.ndarray, bool],
+                 out: np.ndarray | None = None) -> tuple[tuple, tuple]:
     """The selected rows of (lo, hi, mask) sorted into the grid (g_f, dims), and their
     records: (grid (g_f, dims, cell_start, ext, big_pos), (records [V, 8], their integer
-    view, row per position)). Records are float64, or float32 in "fast" precision."""
+    view, row per position)). Records are float64, or float32 in "fast" precision, written
+    into the front of ``out`` (1-d, of that dtype) if given."""
     vis_rows, _, cell_start = visible_order(lo, hi, select, g_f, dims, frame)
     nv = vis_rows.size
     n_small = int(cell_start[int(dims[0] * dims[1] * dims[2])])
-    vis_box = np.empty((nv, 8), np.float32 if frame[1] else np.float64)
+    vis_box = (np.empty((nv, 8), np.float32 if frame[1] else np.float64) if out is None
+               else out[:8 * nv].reshape(nv, 8))
     vis_bits = vis_box.view(np.uint32 if frame[1] else np.uint64)
     ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
     big_pos = np.arange(n_small, nv, dtype=np.int32)

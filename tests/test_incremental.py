@@ -328,6 +328,27 @@ def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move():
     assert plans == [False, True, True, False, True, False, True], plans
 
 
+def test_a_new_grid_writes_its_records_over_the_last_ones():
+    """With the camera moving every frame the grid of visible objects is built again each
+    frame, into one kept buffer (a fresh one per frame was mapped and faulted in again at
+    1M objects), and the frames stay those of a scheduler that builds everything anew."""
+    p = _Pair(ls.Config(max_lights=4))
+    scene = city(3_000, 300, seed=6, shadow_fraction=0.05)
+    p.set_lights(**scene.lights)
+    p.set_objects(**scene.objects)
+    cam = scene.cameras[0]
+    addresses, grids = [], []
+    for i in range(8):
+        cam = _moved_camera(cam, 2.0)
+        fa, fb = p.a.frame([cam], dt=1 / 60), p.b.frame([cam], dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i}")
+        grids.append(p.a._cache.grid)
+        addresses.append(p.a._cache.grid.vis[0].__array_interface__["data"][0])
+    assert all(a is not b for a, b in zip(grids, grids[1:], strict=False)), "grid kept"
+    # The first buffer, and at most one more if the visible set outgrew it.
+    assert len(set(addresses)) <= 2, addresses
+
+
 def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
     """Output arrays of the frame before the last are written again only when nothing
     outside the scheduler holds them: frames a caller keeps stay as returned; frames it
