@@ -191,6 +191,9 @@ def validate_cameras(cameras: Any) -> list[Camera]:
         if int(cid) in seen:
             raise ValidationError("cameras.id", i, f"duplicate camera id {cid}")
         seen.add(int(cid))
+        if _sealed(c):
+            out.append(c)
+            continue
         pos = _camera_vector("position", i, c.position, 3)
         fwd = _camera_vector("forward", i, c.forward, 3)
         fx, fy, fz = (float(v) for v in fwd)
@@ -227,8 +230,27 @@ def validate_cameras(cameras: Any) -> list[Camera]:
             if not ok:
                 rule = {"fov_y": "be in (0, pi)", "far": "be > near"}.get(name, "be > 0")
                 raise ValidationError(f"cameras.{name}", i, f"must {rule}")
-        out.append(Camera(position=pos, forward=fwd, up=up, focus=focus, id=int(cid), **vals))
+        out.append(_seal(Camera(position=pos, forward=fwd, up=up, focus=focus, id=int(cid),
+                                **vals)))
     return out
+
+
+def _seal(c: Camera) -> Camera:
+    """Marks a camera validate_cameras made: its vectors read-only and the objects of its
+    fields recorded, so that it passes again unchecked while they are the same. The
+    service checks a request's cameras before its scene changes (a bad camera refuses the
+    request with nothing changed), then ``Scheduler.frame`` checks them again: ~20 us of a
+    ~1.2 ms service frame at 1k objects."""
+    for v in (c.position, c.forward, c.up, c.focus):
+        v.flags.writeable = False
+    c.__dict__["_checked"] = tuple(getattr(c, f) for f in _CAMERA_FIELDS)
+    return c
+
+
+def _sealed(c: Camera) -> bool:
+    checked = c.__dict__.get("_checked")
+    return checked is not None and all(
+        getattr(c, f) is v for f, v in zip(_CAMERA_FIELDS, checked, strict=True))
 
 
 def validate_dt(dt: Any) -> float:

@@ -817,6 +817,27 @@ def test_valid_camera_edges_pass_validation():
     assert all(c.position.dtype == np.float64 for c in cams)
 
 
+def test_validated_cameras_pass_again_until_a_field_is_replaced(s):
+    """A camera validate_cameras returned passes again as itself (the service checks a
+    request's cameras, then the frame would check them again); its vectors are read-only,
+    and a field set afterwards makes it checked again like any other camera."""
+    from lightsched.scene import validate_cameras
+
+    cams = validate_cameras([camera(id=1), camera(id=2)])
+    again = validate_cameras(cams)
+    assert all(a is b for a, b in zip(again, cams, strict=True))
+    with pytest.raises(ValueError, match="read-only"):
+        cams[0].position[0] = np.nan
+    rejects(s, s.frame, "cameras.id", 1, [cams[0], cams[0]])
+    cams[1].fov_y = -1.0
+    rejects(s, s.frame, "cameras.fov_y", 1, cams)
+    cams[1].fov_y = 1.0
+    cams[1].forward = np.array([0.0, 0.0, 0.0])
+    rejects(s, s.frame, "cameras.forward", 1, cams)
+    fixed = validate_cameras([cams[0], {**vars(camera(id=2))}])
+    assert fixed[0] is cams[0] and fixed[1] is not cams[1]
+
+
 # --------------------------------------------------------------------------- positive
 
 
