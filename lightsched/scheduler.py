@@ -614,12 +614,14 @@ class Scheduler(SceneAPI):
             o_start, o_pairs = np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32))
         # The cache's heap is this frame's too (records below ``used`` are not written):
         # new lists go after them, the heap packed first when short of room or mostly
-        # garbage.
+        # garbage. The room left after packing holds ~4 more frames like this one: with
+        # room for one, a scene moving 10% of its lights packed every other frame (~1 ms
+        # at 100k objects each time).
         seg, heap, used = c.seg, c.heap, c.used  # the cache is this frame's to change
         need = int(w_start[-1]) + int(seg[rows2, 1].sum()) + int(o_start[-1])
         n_live = int(seg[:, 1].sum())
         if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
-            seg, heap, used = compact_heap(seg, heap, need + n_live // 2 + 1024)
+            seg, heap, used = compact_heap(seg, heap, 4 * need + n_live // 2 + 1024)
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag,
                                  (w_start, w_pairs), used))
