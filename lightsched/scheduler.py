@@ -153,7 +153,7 @@ class Scheduler(SceneAPI):
 
     def _scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
         """A reusable buffer of at least ``size`` elements (grown by half when short), so a
-        steady scene allocates no pair memory per frame."""
+        steady scene allocates no pair or record memory per frame."""
         buf = self._buffers.get(name)
         if buf is None or buf.size < size or buf.dtype != dtype:
             buf = np.empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
@@ -289,7 +289,7 @@ class Scheduler(SceneAPI):
         # The grid of visible objects: kept while the visible set and its boxes are. A new
         # one writes its records over the kept one's (nothing reads those once it is made):
         # at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap threshold) was mapped
-        # and faulted in again every other frame, the records kernel 20 ms -> ~70 ms.
+        # and faulted in again every other frame: the records kernel took ~70 ms, not 20.
         if full:
             fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
