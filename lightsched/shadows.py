@@ -33,6 +33,8 @@ from .select import F_NEW_W, I_NEW_ROW
 
 MIN_TIER, MAX_TIER = 256, 4096
 MAX_PLANES = 18  # a convex volume here has at most 6 faces plus 12 edge planes
+SWEEP_BLOCK = 512  # boxes per block of sweep_casters: its [6, 512] float64 columns fit L1
+SWEEP_PARTS = 64  # sweep_casters' parallel parts, each a run of blocks
 
 # The 12 edges of a frustum: (face a, face b, corner c0, corner c1), faces 0 near, 1 far,
 # 2 left, 3 right, 4 bottom, 5 top; corner z*4 + x*2 + y (z 0 near / 1 far, x 0 left /
@@ -306,24 +308,13 @@ def _plane_ok(vn, vq, t, b, i, lo, hi, v):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _in_planes(vn, vq, t, b, first, end, lead, lo, hi, v):
-    """The conservative AABB test of box v against planes first..end-1 of volume b of light
-    t (DESIGN "Tests"),
-    trying plane ``lead`` first. Returns (inside, the plane that failed or lead): a caller
-    scanning many boxes passes that plane back as ``lead``, so the plane that rejects most
-    boxes is soon tried first. The AND of the planes does not depend on their order."""
-    if lead >= first and lead < end and not _plane_ok(vn, vq, t, b, lead, lo, hi, v):
-        return False, lead
-    for i in range(first, end):
-        if i != lead and not _plane_ok(vn, vq, t, b, i, lo, hi, v):
-            return False, i
-    return True, lead
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def box_in_volume(vols, t, b, lo, hi, v):
     """The conservative AABB test of box v against volume b of light t (DESIGN "Tests")."""
-    return _in_planes(vols[0], vols[1], t, b, 0, vols[2][t, b], -1, lo, hi, v)[0]
+    vn, vq, vm, _ = vols
+    for i in range(vm[t, b]):
+        if not _plane_ok(vn, vq, t, b, i, lo, hi, v):
+            return False
+    return True
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -377,43 +368,107 @@ def caster_bits(hot, lf, j, typ, vols, t, rec, world):
     return 0
 
 
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _block_in_planes(vn, vq, t, b, first, end, lead, box, inside):
+    """inside[r] &= box r of the block is on the inner side of planes first..end-1 of
+    volume b of light t, by the AABB test of ``_plane_ok`` with the same arithmetic. Plane
+    by plane over the whole block: the corner a plane picks is the same for every box, so
+    the loop has no branch and vectorises over the block's coordinates (box [6, m]: lo x,
+    y, z, hi x, y, z). Plane ``lead`` goes first, and the scan stops once no box is left.
+    Returns (any box left, the plane that emptied the block, else lead)."""
+    has_lead = first <= lead < end
+    for step in range(end - first):
+        i = first + step
+        if has_lead:
+            i = lead if step == 0 else (i - 1 if i - 1 < lead else i)
+        n0 = vn[t, b, i, 0]
+        n1 = vn[t, b, i, 1]
+        n2 = vn[t, b, i, 2]
+        q0 = vq[t, b, i, 0]
+        q1 = vq[t, b, i, 1]
+        q2 = vq[t, b, i, 2]
+        c0 = box[3] if n0 >= 0.0 else box[0]
+        c1 = box[4] if n1 >= 0.0 else box[1]
+        c2 = box[5] if n2 >= 0.0 else box[2]
+        left = 0
+        for r in range(inside.shape[0]):
+            k = inside[r] & (n0 * (c0[r] - q0) + n1 * (c1[r] - q1) + n2 * (c2[r] - q2) >= 0.0)
+            inside[r] = k
+            left += k
+        if left == 0:
+            return False, i
+    return True, lead
+
+
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def sweep_casters(lo, hi, casts, omask, lmask, vols):
-    """caster_masks of every object for each directional light t (parallel over objects):
-    bit b set iff the object casts, its mask matches lmask[t] and its box [lo, hi] is in
-    volume b (camera*C + cascade sweep); vols = (normals, points, counts, shared) from
-    ``culling_volumes``, the shared leading planes tested once per camera. Returns bits
-    [T, N] uint32."""
-    vn, vq, vm, shared = vols
+    """caster_masks of every object for each directional light t (parallel over blocks of
+    SWEEP_BLOCK objects): bit b set iff the object casts, its mask matches lmask[t] and its
+    box [lo, hi] is in volume b (camera*C + cascade sweep); vols = (normals, points,
+    counts, shared) from ``culling_volumes``, the shared leading planes tested once per
+    camera. Returns bits [T, N] uint32.
+
+    A shadow distance is small beside a large scene, so most boxes are rejected, each by
+    whichever plane it lies outside of. Box by box with an early exit (the version before
+    this one) that took 14.5 ms for 1M boxes on 2 threads; plane by plane over a block of
+    boxes copied into columns (``_block_in_planes``), stopping once the block is empty, it
+    takes 3.9 ms, the copy of the boxes being most of it (bench/RESULTS.md, issue 6)."""
+    vm, shared = vols[2], vols[3]
     n = lo.shape[0]
+    bits = np.empty((lmask.shape[0], n), np.uint32)
+    n_blocks = (n + SWEEP_BLOCK - 1) // SWEEP_BLOCK
+    n_parts = min(n_blocks, SWEEP_PARTS)
+    for part in nb.prange(n_parts):
+        box = np.empty((6, SWEEP_BLOCK))
+        base = np.empty(SWEEP_BLOCK, np.bool_)
+        in_cam = np.empty(SWEEP_BLOCK, np.bool_)
+        inside = np.empty(SWEEP_BLOCK, np.bool_)
+        acc = np.empty(SWEEP_BLOCK, np.uint32)
+        # The plane that emptied the part's last block goes first in the next one.
+        lead = np.full(vm.shape, -1, np.int64)
+        lead_shared = np.full(shared.shape, -1, np.int64)
+        for blk in range(n_blocks * part // n_parts, n_blocks * (part + 1) // n_parts):
+            o0 = blk * SWEEP_BLOCK
+            m = min(n, o0 + SWEEP_BLOCK) - o0
+            _sweep_block(lo, hi, casts, omask, lmask, vols, o0,
+                         (box[:, :m], base[:m], in_cam[:m], inside[:m], acc[:m]),
+                         (lead, lead_shared), bits)
+    return bits
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
+    """sweep_casters on the boxes o0.. of one block (scratch sized to the block)."""
+    vn, vq, vm, shared = vols
+    box, base, in_cam, inside, acc = scratch
+    lead, lead_shared = leads
     n_cam = shared.shape[1]
     n_casc = vm.shape[1] // n_cam
-    bits = np.zeros((lmask.shape[0], n), np.uint32)
-    n_chunks = (n + 1023) // 1024
-    for ch in nb.prange(n_chunks):
-        lead = np.zeros(vm.shape[:2], np.int64)
-        lead_shared = np.zeros(shared.shape, np.int64)
-        for o in range(ch * 1024, min(n, (ch + 1) * 1024)):
-            if not casts[o]:
+    m = acc.shape[0]
+    for r in range(m):
+        for a in range(3):
+            box[a, r] = lo[o0 + r, a]
+            box[3 + a, r] = hi[o0 + r, a]
+    for t in range(lmask.shape[0]):
+        for r in range(m):
+            base[r] = casts[o0 + r] and (np.int64(omask[o0 + r]) & lmask[t]) != 0
+            acc[r] = 0
+        for k in range(n_cam):
+            b0 = k * n_casc
+            in_cam[:] = base
+            left, lead_shared[t, k] = _block_in_planes(vn, vq, t, b0, 0, shared[t, k],
+                                                       lead_shared[t, k], box, in_cam)
+            if not left:
                 continue
-            for t in range(lmask.shape[0]):
-                if np.int64(omask[o]) & lmask[t] == 0:
-                    continue
-                acc = 0
-                for k in range(n_cam):
-                    b0 = k * n_casc
-                    inside, lead_shared[t, k] = _in_planes(vn, vq, t, b0, 0, shared[t, k],
-                                                           lead_shared[t, k], lo, hi, o)
-                    if not inside:
-                        continue
-                    for c in range(n_casc):
-                        b = b0 + c
-                        inside, lead[t, b] = _in_planes(vn, vq, t, b, shared[t, k], vm[t, b],
-                                                        lead[t, b], lo, hi, o)
-                        if inside:
-                            acc |= 1 << b
-                bits[t, o] = acc
-    return bits
+            for c in range(n_casc):
+                b = b0 + c
+                inside[:] = in_cam
+                left, lead[t, b] = _block_in_planes(vn, vq, t, b, shared[t, k], vm[t, b],
+                                                    lead[t, b], box, inside)
+                if left:
+                    for r in range(m):
+                        acc[r] |= np.uint32(inside[r]) << b
+        bits[t, o0:o0 + m] = acc
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
