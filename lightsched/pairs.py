@@ -818,19 +818,27 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def scan_pairs(seg, heap_j, light_flag):
+def scan_pairs(seg, heap_j, light_flag, drop):
     """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
-    so an incremental frame finds the objects that hold a pair of a changed light."""
+    so an incremental frame finds the objects that hold a pair of a changed light, and
+    the number of its pairs whose light's flag has no ``drop`` bit: the pairs
+    ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
+    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
+    kept = np.empty(n, np.int64)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
             acc = 0
+            keep = 0
             for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                acc |= light_flag[heap_j[t]]
+                f = light_flag[heap_j[t]]
+                acc |= f
+                keep += (f & drop) == 0
             out[o] = acc
-    return out
+            kept[o] = keep
+    return out, kept
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
@@ -861,21 +869,26 @@ def compact_heap(seg, heap, spare):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def replace_lists(rows, mode, cache, walked, fresh, used):
+def replace_lists(rows, mode, cache, walked, kept, fresh, used):
     """New pair lists of the object ``rows`` (ascending), appended to the heap from record
-    ``used`` (the caller made room: see ``list_sizes``). mode per row: 0 empty (the object
-    left the view), 1 only its ``fresh`` pairs (its lists were rebuilt against every light:
-    it moved or came into view), 2 its cached pairs of lights not flagged in ``walked``
-    followed by its fresh pairs (lights that changed were walked again). cache = (seg,
-    (P, light row)), updated in place; fresh = (start [N+1], (P, light row)) grouped by
-    object row."""
+    ``used`` (the caller made room). mode per row: 0 empty (the object left the view), 1
+    only its ``fresh`` pairs (its lists were rebuilt against every light: it moved or came
+    into view), 2 its cached pairs of lights not flagged in ``walked`` (kept[o] of them,
+    from ``scan_pairs``; all of them if kept is empty) followed by its fresh pairs (lights
+    that changed were walked again). cache = (seg, (P, light row)), updated in place;
+    fresh = (start [N+1], (P, light row)) grouped by object row."""
     seg, (heap_p, heap_j) = cache
     f_start, (f_p, f_j) = fresh
-    sizes = list_sizes(rows, mode, cache, walked, fresh)
     at = np.empty(rows.shape[0] + 1, np.int64)
     at[0] = used
     for r in range(rows.shape[0]):
-        at[r + 1] = at[r] + sizes[r]
+        o = rows[r]
+        size = 0
+        if mode[r] == 2:
+            size = kept[o] if kept.size else seg[o, 1]
+        if mode[r] != 0:
+            size += f_start[o + 1] - f_start[o]
+        at[r + 1] = at[r] + size
     for r in nb.prange(rows.shape[0]):
         o = rows[r]
         d = at[r]
@@ -893,21 +906,3 @@ def replace_lists(rows, mode, cache, walked, fresh, used):
         seg[o, 0] = at[r]
         seg[o, 1] = d - at[r]
     return at[rows.shape[0]]
-
-
-@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def list_sizes(rows, mode, cache, walked, fresh):
-    """Records each new list of ``replace_lists`` takes (parallel over rows)."""
-    seg, (_, heap_j) = cache
-    f_start = fresh[0]
-    sizes = np.zeros(rows.shape[0], np.int64)
-    for r in nb.prange(rows.shape[0]):
-        o = rows[r]
-        c = 0
-        if mode[r] == 2:
-            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                c += not walked[heap_j[t]]
-        if mode[r] != 0:
-            c += f_start[o + 1] - f_start[o]
-        sizes[r] = c
-    return sizes

@@ -599,7 +599,8 @@ class Scheduler(SceneAPI):
         flag = np.zeros(live.size, np.uint8)
         flag[walked] |= WALKED
         flag[(live != c.live) | (shadow_of_row != c.shadow_of_row)] |= RESELECT
-        holds = scan_pairs(c.seg, c.heap[1], flag) if flag.any() else np.zeros(n, np.uint8)
+        holds, kept = (scan_pairs(c.seg, c.heap[1], flag, WALKED) if flag.any()
+                       else (np.zeros(n, np.uint8), np.zeros(0, np.int64)))
         w_start, w_pairs = self._group(fresh, n)
         rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
         mode = np.full(n, 2, np.int8)
@@ -623,9 +624,9 @@ class Scheduler(SceneAPI):
         if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
             seg, heap, used = compact_heap(seg, heap, 4 * need + n_live // 2 + 1024)
         walked_flag = (flag & WALKED) != 0
-        used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag,
+        used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,
                                  (w_start, w_pairs), used))
-        used = int(replace_lists(rows1, mode[rows1], (seg, heap), walked_flag,
+        used = int(replace_lists(rows1, mode[rows1], (seg, heap), walked_flag, kept,
                                  (o_start, o_pairs), used))
         run = (holds != 0) | rewrite | c.fading
         run[rows1] = True
