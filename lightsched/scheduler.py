@@ -63,8 +63,11 @@ from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_cas
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
-# Grid cell edge over the median light radius (measured on the city bench, see RESULTS.md).
-CELL_PER_RADIUS = 1.0
+# Grid cell edge over the median light radius. Cells 4x finer along z (pairs.RUN_SPLIT)
+# already trim each column's run, so wider columns pay: 1.0 -> 1.5 took the light pass
+# 8.2 -> 7.2 ms at (100k, 10k) and 77 -> 64 ms at 1M with the camera moving; 0.7 was
+# slower, 2.0 no better (bench/paired.py, RESULTS.md issue 6).
+CELL_PER_RADIUS = 1.5
 # An incremental frame beyond this share of changed lights or objects costs about what a
 # full one does: run the full frame.
 FULL_SHARE = 0.5
