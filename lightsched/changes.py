@@ -47,9 +47,7 @@ def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...
             return None
         rows = None  # a set_ call with the same ids: compare every row
     elif store.touched:
-        # Sorted and deduplicated (np.unique costs about ten times more here).
-        rows = np.sort(np.concatenate(store.touched))
-        rows = rows[np.concatenate(([True], rows[1:] != rows[:-1]))]
+        rows = _sorted_unique(np.concatenate(store.touched), ids.size)
     else:
         return np.zeros(0, np.int64)
     n = ids.size if rows is None else rows.size
@@ -61,3 +59,16 @@ def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...
             rows_differ(row_words(a), same, row_words(b), same, changed)
     out = np.flatnonzero(changed) if rows is None else rows[changed]
     return out.astype(np.int64)
+
+
+def _sorted_unique(rows: np.ndarray, n: int) -> np.ndarray:
+    """The distinct values of ``rows`` (in 0..n-1), ascending. Many rows (an update of
+    every light, in the caller's order): marked in an [n] mask, linear; np.sort of 100k
+    permuted rows took 3.9 ms, the mask ~0.1. Few: sorted, then deduplicated (np.unique
+    costs about ten times more here)."""
+    if rows.size * 16 > n:
+        mark = np.zeros(n, np.bool_)
+        mark[rows] = True
+        return np.flatnonzero(mark)
+    rows = np.sort(rows)
+    return rows[np.concatenate(([True], rows[1:] != rows[:-1]))]
