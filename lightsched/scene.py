@@ -392,11 +392,18 @@ LIGHT_FIELDS = ("id", "type", "position", "radius", "direction", "outer_angle", 
 OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "casts_shadows", "mask", "static")
 
 
-def _id_rows(store_ids: np.ndarray, ids_in: Any, what: str) -> tuple[np.ndarray, np.ndarray]:
+def _id_rows(store: Any, ids_in: Any, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Validates ids of an update_/remove_ call; returns (ids, store rows)."""
     if ids_in is None:
         raise ValidationError("id", None, "required")
-    ids = _check_ids(_parse("id", ids_in, _len_of("id", ids_in), "i"))
+    raw = _parse("id", ids_in, _len_of("id", ids_in), "i")
+    store_ids = store.id
+    if raw.size * 16 > store_ids.size:
+        rows = _bulk_rows(store, raw)
+        if rows is not None:
+            return raw.astype(np.int32), rows
+    # Few ids, or some id is bad: the checks in their order, for the error they give.
+    ids = _check_ids(raw)
     rows = np.searchsorted(store_ids, ids)
     rows_c = np.minimum(rows, max(store_ids.size - 1, 0))
     known = (rows < store_ids.size) & (store_ids[rows_c] == ids) if store_ids.size else \
@@ -405,6 +412,35 @@ def _id_rows(store_ids: np.ndarray, ids_in: Any, what: str) -> tuple[np.ndarray,
     if bad is not None:
         raise ValidationError("id", bad, f"unknown {what} id {int(ids[bad])}")
     return ids, rows
+
+
+def _bulk_rows(store: Any, ids: np.ndarray) -> np.ndarray | None:
+    """Store rows of ``ids`` (a call updating a good share of the store) by an id -> row
+    table kept until the store's ids change, and duplicates found by marking rows: linear,
+    where np.searchsorted and the duplicate check's np.argsort cost ~10 + 6 ms for 100k
+    ids. None if an id is out of range, unknown or repeated (the caller's checks then
+    name it), or if the ids are too sparse for a table."""
+    store_ids = store.id
+    n = store_ids.size
+    if n == 0 or (ids < 0).any() or (ids > int(store_ids[-1])).any():
+        return None
+    cached = store.rows_by_id
+    if cached is None or cached[0] is not store_ids:
+        span = int(store_ids[-1]) + 1
+        table = None
+        if span <= 4 * n + 1024:
+            table = np.full(span, -1, np.int32)
+            table[store_ids] = np.arange(n, dtype=np.int32)
+        cached = store.rows_by_id = (store_ids, table)
+    table = cached[1]
+    if table is None:
+        return None
+    rows = table[ids].astype(np.int64)
+    if (rows < 0).any():
+        return None
+    mark = np.zeros(n, np.bool_)
+    mark[rows] = True
+    return rows if np.count_nonzero(mark) == rows.size else None
 
 
 def _len_of(name: str, value: Any) -> int:
@@ -436,6 +472,8 @@ class LightStore:
     # Rows that update_lights calls wrote since the last frame (dirty rows; a scheduler
     # compares them with last frame's values and clears this after each frame).
     touched: tuple[np.ndarray, ...] = ()
+    # (the id array it was built from, id -> row table or None): see _bulk_rows.
+    rows_by_id: Any = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.id.size)
@@ -576,6 +614,8 @@ class ObjectStore:
     version: int = 0
     # Rows that update_objects calls wrote since the last frame (see LightStore.touched).
     touched: tuple[np.ndarray, ...] = ()
+    # (the id array it was built from, id -> row table or None): see _bulk_rows.
+    rows_by_id: Any = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.id.size)
@@ -665,7 +705,7 @@ def _call_rows(fields: dict[str, Any]) -> int:
 def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str, Any],
             what: str) -> None:
     """update_ of some fields by id: validates the merged rows, then writes them."""
-    ids, rows = _id_rows(store.id, fields.pop("id", None), what)
+    ids, rows = _id_rows(store, fields.pop("id", None), what)
     given = [f for f in names[1:] if fields.get(f) is not None]
     cols = validate(fields, store.columns(rows), ids.size)
     # Only given fields can change (validate takes the others from the rows as they are).
@@ -680,10 +720,10 @@ def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str,
     store.version += 1
 
 
-def _keep_mask(store_ids: np.ndarray, ids: Any, what: str) -> np.ndarray:
+def _keep_mask(store: Any, ids: Any, what: str) -> np.ndarray:
     """Rows that a remove_ call keeps (every id must exist)."""
-    _, rows = _id_rows(store_ids, ids, what)
-    keep = np.ones(store_ids.size, bool)
+    _, rows = _id_rows(store, ids, what)
+    keep = np.ones(store.id.size, bool)
     keep[rows] = False
     return keep
 
@@ -714,7 +754,7 @@ class SceneAPI:
         _update(self.lights, LightStore.validate, LIGHT_FIELDS, fields, "light")
 
     def remove_lights(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
-        keep = _keep_mask(self.lights.id, id, "light")
+        keep = _keep_mask(self.lights, id, "light")
         self.lights.assign(self.lights.columns(keep))
 
     # objects
@@ -725,7 +765,7 @@ class SceneAPI:
         _update(self.objects, ObjectStore.validate, OBJECT_FIELDS, fields, "object")
 
     def remove_objects(self, id: Any) -> None:  # noqa: A002 - DESIGN's keyword
-        self.objects.keep_rows(_keep_mask(self.objects.id, id, "object"))
+        self.objects.keep_rows(_keep_mask(self.objects, id, "object"))
 
     def apply(self, changes: Iterable[tuple[str, dict[str, Any]]]) -> None:
         """Runs a batch of scene changes, (method name, keyword fields) with the names of

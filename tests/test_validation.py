@@ -285,6 +285,49 @@ def test_ids_must_be_integers(s, bad):
             bounds_max=np.ones((3, 3)))
 
 
+@pytest.mark.parametrize("span", [3, 1000], ids=["dense ids", "sparse ids"])
+def test_large_updates_find_the_same_rows_and_errors_as_small_ones(sched_cls, span):
+    """An update of many rows finds them through an id -> row table kept until the ids
+    change (scene._bulk_rows; sparse ids fall back to binary search), one of few rows by
+    binary search: the same stored rows, and for bad ids the same error (the duplicate
+    check comes before the unknown-id check in either)."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    ids = rng.permutation(span * n)[:n]
+    lights = dict(id=ids, position=rng.uniform(-50, 50, (n, 3)), radius=np.ones(n))
+    bulk, chunked = sched_cls(), sched_cls()
+    for sch in (bulk, chunked):
+        sch.set_lights(**lights)
+    order = rng.permutation(n)
+    moved = rng.uniform(-50, 50, (n, 3))
+    bulk.update_lights(id=ids[order], position=moved)
+    for part in np.array_split(np.arange(n), 64):  # 63 rows a call: binary search
+        chunked.update_lights(id=ids[order][part], position=moved[part])
+    for f in LIGHT_FIELDS:
+        assert np.array_equal(getattr(bulk.lights, f), getattr(chunked.lights, f)), f
+    assert np.array_equal(bulk.lights.position[np.searchsorted(bulk.lights.id, ids[order])],
+                          moved)
+    bulk.update_lights(id=ids[order], radius=np.full(n, 2.0))  # the table, kept, again
+    assert (bulk.lights.radius == 2.0).all()
+    unknown = int(ids.max()) + 1
+    dup = ids[order].copy()
+    dup[3000] = dup[10]
+    rejects(bulk, bulk.update_lights, "id", 3000, id=dup, radius=np.ones(n))
+    bad = ids[order].copy()
+    bad[2000] = unknown
+    rejects(bulk, bulk.update_lights, "id", 2000, id=bad, radius=np.ones(n))
+    bad[3000] = bad[10]  # an unknown id and a repeat: the repeat is named
+    rejects(bulk, bulk.update_lights, "id", 3000, id=bad, radius=np.ones(n))
+    bad = ids[order].copy()
+    bad[1500] = -1
+    rejects(bulk, bulk.remove_lights, "id", 1500, id=bad)
+    bulk.remove_lights(id=ids[order][: n // 2])  # new ids: the table is made again
+    rest = np.sort(ids[order][n // 2:])
+    assert np.array_equal(bulk.lights.id, rest)
+    bulk.update_lights(id=rest[::-1], radius=np.full(rest.size, 3.0))
+    assert (bulk.lights.radius == 3.0).all()
+
+
 def test_max_int32_id_is_fine(sched_cls):
     sch = sched_cls()
     sch.set_lights(id=[INT32_MAX, 0], position=np.zeros((2, 3)), radius=[1, 1])
