@@ -306,7 +306,7 @@ def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
     that last emptied a block into the next one (shadows.sweep_casters). A scene of fewer
     than SWEEP_PARTS blocks has one block per part and never carries it, so here ~70k
     boxes (2-3 blocks per part) over a town, two cameras, a slanted sun with a shadow
-    distance that keeps a fraction of them (~900 to ~17k casters over 40 seeds), some
+    distance that keeps a fraction of them (955 to 20k casters over 63 seeds), some
     objects not casting or masked out; equal to the oracle's frame."""
     rng = np.random.default_rng(seed)
     n = 70_000
@@ -322,10 +322,11 @@ def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
                   intensity=[1.0], position=[[0.0, 0.0, 0.0]], radius=[1.0])
     cams = []
     for k in range(2):
-        forward = rng.uniform(-1.0, 1.0, 3) * (1.0, 0.3, 1.0)
-        cams.append(camera(position=rng.uniform(-300.0, 300.0, 3) * (1.0, 0.1, 1.0) + (0, 35, 0),
-                           forward=forward, up=up_for(forward), fov_y=1.0, aspect=1.6,
-                           near=0.5, far=900.0, id=k))
+        # Over the town, looking at a point of it: the view always holds some of it.
+        position = rng.uniform(-300.0, 300.0, 3) * (1.0, 0.1, 1.0) + (0.0, 35.0, 0.0)
+        forward = rng.uniform(-200.0, 200.0, 3) * (1.0, 0.0, 1.0) - position
+        cams.append(camera(position=position, forward=forward, up=up_for(forward), fov_y=1.0,
+                           aspect=1.6, near=0.5, far=900.0, id=k))
     cfg = ls.Config(shadow_distance=float(rng.uniform(100.0, 500.0)), max_lights=2)
     frames = []
     for cls in (ls.Scheduler, ref.Scheduler):
