@@ -302,12 +302,12 @@ def test_never_missed_on_random_scenes():
 @examples(0.04)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
-    """The sun's sweep runs over blocks of boxes, each part of the scan carrying the plane
-    that last emptied a block into the next one (shadows.sweep_casters). A scene of fewer
-    than SWEEP_PARTS blocks has one block per part and never carries it, so here ~70k
-    boxes (2-3 blocks per part) over a town, two cameras, a slanted sun with a shadow
-    distance that keeps a fraction of them (955 to 20k casters over 63 seeds), some
-    objects not casting or masked out; equal to the oracle's frame."""
+    """The sun's sweep (shadows.sweep_casters) at a scale where each of its parallel parts
+    scans 2-3 blocks of boxes: ~70k boxes over a town, two cameras looking at it, a slanted
+    sun with a shadow distance that keeps a fraction of them (955 to 20k casters over 63
+    seeds), some objects not casting or masked out; equal to the oracle's frame. The plane
+    order a part carries from block to block is checked below, on plane sets built to
+    empty whole blocks."""
     rng = np.random.default_rng(seed)
     n = 70_000
     centre = rng.uniform(-600.0, 600.0, (n, 3))
