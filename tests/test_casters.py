@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 import lightsched as ls
 import lightsched.reference as ref
+from lightsched.shadows import MAX_PLANES, SWEEP_BLOCK, sweep_casters
 
 SCHEDULERS = pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
 MARGIN = 1e-6
@@ -371,8 +372,6 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
     in numpy. The boxes come in runs: whole blocks far outside one plane (the block is
     emptied and that plane is tried first in the part's next blocks), then blocks near the
     volumes, so a plane the carried order skipped would show."""
-    from lightsched.shadows import MAX_PLANES, SWEEP_BLOCK, sweep_casters
-
     rng = np.random.default_rng(seed)
     n_t, n_cam, n_casc = 2, 2, 2
     n_vol = n_cam * n_casc
