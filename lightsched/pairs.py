@@ -6,10 +6,11 @@ object, then runs top-K with hysteresis (select.py) and the fade machine (fade.p
 object. Pairs are plain arrays (row, P), never Python objects.
 
 The work is light-major, in four kernels:
-1. ``visible_order`` + ``visible_objects``: visible objects sorted by the grid cell of their
-   centre (a counting sort), one record each (lo, hi, mask: 64 bytes in float64, 32 in the
-   "fast" precision's float32 relative to the first camera); objects larger than a cell go
-   past the last cell, to a short list every light tests.
+1. ``visible_order`` + ``visible_objects``: the objects of the grid (the visible ones, or
+   every object with the invisible ones' masks 0, scheduler.py) sorted by the grid cell of
+   their centre (a counting sort), one record each (lo, hi, mask: 64 bytes in float64, 32
+   in the "fast" precision's float32 relative to the first camera); objects larger than a
+   cell go past the last cell, to a short list every light tests.
 2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
    the centre of an object it reaches (its sphere widened by the largest object
    half-extent, cut column by column), each column one contiguous run of objects; the
@@ -567,10 +568,12 @@ def _record_e2(box, v):
 def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
     """Appends (object row, caster mask) of grid position v for shadowed light row j at n
     when it is a caster: casts_shadows, mask, d2 <= r*r, then shadows.caster_bits.
-    Returns the new n."""
-    box, bits_view, box_rows, lo, hi, w_lo, w_hi = recs
+    Returns the new n. casts = (casts_shadows, mask) of the store: the mask in a grid of
+    every object's records is 0 for the invisible ones (they pair with no light), but
+    invisible objects cast."""
+    box, box_rows, lo, hi, w_lo, w_hi = recs
     o = box_rows[v]
-    if not casts[o] or np.int64(bits_view[v, 6]) & np.int64(hot[j, 4]) == 0:
+    if not casts[0][o] or np.int64(casts[1][o]) & np.int64(hot[j, 4]) == 0:
         return n
     r = hot[j, 3]
     if not box_d2(box, v, hot[j, 0], hot[j, 1], hot[j, 2]) <= r * r:
@@ -590,16 +593,16 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     visible_objects): each light walks the same column runs as ``light_pass`` and keeps
     the objects that pass ``_caster``. vols = culling volumes indexed like rows; recs =
     (records [V, 8], their integer view, object row per position); objects = (casts_shadows,
-    bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
+    mask, bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
     records may be relative to the first camera); out = (object rows, caster masks), light t
     writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
     a light's rows come in grid order."""
     hot, lf = lights
     g_f, dims, cell_start, ext, big_pos = grid
-    box, bits_view, box_rows = recs
-    casts = objects[0]
+    box, box_rows = recs[0], recs[2]
+    casts = (objects[0], objects[1])
     # Flat: numba's parallel loops take no tuple nested in a tuple of arrays.
-    walk = (box, bits_view, box_rows, box[:, 0:3], box[:, 3:6], objects[1], objects[2])
+    walk = (box, box_rows, box[:, 0:3], box[:, 3:6], objects[2], objects[3])
     # Unpacked here: arrays taken out of a tuple inside the parallel loop were written to
     # copies (numba 0.68 parfors), and the stores were lost.
     out_rows, out_mask = out

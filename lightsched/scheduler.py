@@ -3,16 +3,16 @@ incrementally (section 6).
 
 Takes the stores (scene.py) and cameras; returns a Frame (frame.py). Stages, each timed in
 stats["seconds"]: cameras (frustum.py), changes (what differs from the last frame,
-changes.py), visibility (frustum.py), pack (priority.py), grid (the grid of visible
-objects: its shape, their order, their records), pairs (Affects and P per light, pairs.py),
+changes.py), visibility (frustum.py), pack (priority.py), grid (the grid of objects: its
+shape, their order, their records), pairs (Affects and P per light, pairs.py),
 shadows (ranking and tiers, shadows.py), casters (culling volumes and caster lists), lists
 (the pair cache: grouping by object, or the rewrite of the changed objects' lists),
 objects (top-K and fade per object), output.
 
 A full frame computes every pair; an incremental one keeps the last frame's pair cache
 (per object its (P, light row) pairs, pairs.py) and recomputes only what changed:
-- lights whose fields changed, or that entered or left the view, walk the grid of visible
-  objects again; the objects that held a pair of theirs or get one now rewrite their lists;
+- lights whose fields changed, or that entered or left the view, walk the grid of objects
+  again; the objects that held a pair of theirs or get one now rewrite their lists;
 - objects that moved or came into view get new lists against every light (a small grid of
   just them, walked by every light); objects that left the view lose theirs;
 - the object pass runs on those objects, on the objects holding a pair of a light whose
@@ -63,6 +63,15 @@ from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_cas
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
+# With at least this share of the objects visible, the grid holds every object, so a camera
+# move only changes its records' masks and the casters need no second grid of the invisible
+# objects. Below it, the grid holds the visible objects only: a view of a small part of a
+# large world keeps small cells and a small grid.
+EVERY_OBJECT_SHARE = 0.5
+# A kept grid of every object serves while its cell edge is within this factor of the one
+# the competing lights ask for (the light pass took about the same time from 1.4x to 2.0x
+# the median radius at (100k, 10k)); the median moves a little whenever the camera does.
+CELL_SLACK = 1.25
 # Grid cell edge over the median light radius. Cells 4x finer along z (pairs.RUN_SPLIT)
 # already trim each column's run, so wider columns pay: 1.0 -> 1.5 took the light pass
 # 8.2 -> 7.2 ms at (100k, 10k) and 77 -> 64 ms at 1M with the camera moving; 0.7 was
@@ -95,12 +104,19 @@ WALKED, RESELECT = 1, 2
 
 @dataclass
 class _Grid:
-    """The grid of visible objects a frame walked: (origin and 1/h, dims, cell_start, ext,
-    big_pos) and the per-position records (vis_box [V, 8], object row per position)."""
+    """The grid of objects a frame walked: (origin and 1/h, dims, cell_start, ext, big_pos)
+    and the per-position records (vis_box [V, 8], its integer view, object row per
+    position). Either a grid of the visible objects (``shown`` None), or of every object
+    (``shown`` the visibility its records hold: an invisible object's record has mask 0,
+    so it pairs with no light; ``pos_of`` each row's position, ``box`` every object's
+    bounding box, which set the grid's extent)."""
 
     grid: tuple
     vis: tuple
     plan: str
+    shown: np.ndarray | None = None
+    pos_of: np.ndarray | None = None
+    box: np.ndarray | None = None
 
 
 @dataclass
@@ -289,8 +305,11 @@ class Scheduler(SceneAPI):
         compete = vis_l & (~is_dir if not cfg.directional_in_slots else True)
         t = _lap(seconds, "pack", t)
 
-        # The grid of visible objects: kept while the visible set and its boxes are. A new
-        # one writes its records over the kept one's (nothing reads those once it is made):
+        # The grid: of every object once at least EVERY_OBJECT_SHARE are visible, kept while
+        # the objects are (a camera move rewrites the masks of the objects that entered or
+        # left the view); else of the visible objects, kept while the visible set and its
+        # boxes are. A new one writes its records over the kept one's (nothing reads those
+        # once it is made):
         # at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap threshold) was mapped
         # and faulted in again every other frame: the records kernel took ~70 ms, not 20.
         if full:
@@ -300,7 +319,10 @@ class Scheduler(SceneAPI):
             moved[orows] = True
             fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
             left_rows = np.flatnonzero(c.vis_o & ~vis_o)
-        if full and objects_kept:
+        if n and np.count_nonzero(vis_o) >= EVERY_OBJECT_SHARE * n:
+            grid, grid_kept = self._every_grid(c, vis_o, orows, packed, compete, is_dir,
+                                               rec_frame)
+        elif full and objects_kept and c.grid.shown is None:
             # The lights set the cell edge: the kept grid serves while it is the same.
             shape = _grid_shape(int(np.count_nonzero(vis_o)), box, packed, compete, is_dir,
                                 rec_frame)
@@ -309,7 +331,7 @@ class Scheduler(SceneAPI):
             grid = (_Grid(c.grid.grid, c.grid.vis, shape[2] or c.grid.plan) if grid_kept
                     else self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame,
                                             shape, "records"))
-        elif full or fresh_rows.size or left_rows.size:
+        elif full or fresh_rows.size or left_rows.size or c.grid.shown is not None:
             grid_kept = False
             grid = self._visible_grid(vis_o, box, packed, compete, is_dir, rec_frame,
                                       records="records")
@@ -317,7 +339,7 @@ class Scheduler(SceneAPI):
             grid_kept = True
             grid = c.grid
         plan["pairs"] = grid.plan
-        if full and grid_kept:
+        if full and grid_kept and grid.shown is None:
             plan["pairs"] += " (kept: the objects and cameras did not change)"
         if not compete.any() or not vis_o.any():
             plan["pairs"] = "none: no competing light or no visible object"
@@ -539,6 +561,54 @@ class Scheduler(SceneAPI):
         assert c is not None
         return {name: getattr(c.frame, name).copy() for name in _OUT}
 
+    def _every_grid(self, c: _Cache | None, vis_o: np.ndarray, orows: Any,
+                    packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
+                    is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> tuple[_Grid, bool]:
+        """The grid of every object, and whether it was kept: the last frame's serves while
+        no object changed (``orows`` empty), the records' origin is the same and its cell
+        edge is within CELL_SLACK of the one the lights ask for; then only the records of
+        the objects whose visibility changed get their mask (or 0) again."""
+        objs = self.objects
+        n = len(objs)
+        kept = (c is not None and c.grid.shown is not None and orows is not None
+                and orows.size == 0 and np.array_equal(frame[0], c.origin))
+        box = c.grid.box if kept else np.concatenate([objs.bounds_min.min(0),
+                                                       objs.bounds_max.max(0)])
+        # The competing lights' radii set the cell edge: the same ones ask for the same grid
+        # (their median is ~0.1 ms at 10k lights).
+        same_radii = (kept and np.array_equal(compete, c.compete)
+                      and np.array_equal(packed[0][:, 3], c.packed[0][:, 3]))
+        shape = None if same_radii else _grid_shape(n, box, packed, compete, is_dir, frame)
+        if kept and shape is not None:
+            g_f = c.grid.grid[0]
+            if (shape[2] is not None) != c.grid.plan.startswith("brute"):
+                kept = False
+            elif shape[2] is not None:
+                kept = np.array_equal(shape[0], g_f) and np.array_equal(shape[1], c.grid.grid[1])
+            else:
+                ratio = shape[0][3] / g_f[3]  # kept edge over the edge asked for
+                kept = 1 / CELL_SLACK <= ratio <= CELL_SLACK
+        if kept:
+            g = c.grid
+            rows = (np.zeros(0, np.int64) if vis_o is g.shown
+                    else np.flatnonzero(vis_o != g.shown))
+            g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
+            plan = g.plan.split(" (kept", 1)[0] + (
+                f" (kept: the objects did not change; {rows.size} records' visibility "
+                "updated)")
+            return _Grid(g.grid, g.vis, plan, vis_o, g.pos_of, box), True
+        assert shape is not None
+        g_f, dims, plan = shape
+        out = self._scratch("records", 8 * n, np.float32 if frame[1] else np.float64)
+        grid, recs, pos_of = _object_grid(objs.bounds_min, objs.bounds_max,
+                                          np.where(vis_o, objs.mask, 0).astype(objs.mask.dtype, copy=False),
+                                          np.ones(n, np.bool_), g_f, dims, frame, out)
+        if plan is None:
+            plan = (f"grid of every object, the invisible ones masked out ({dims[0]}x{dims[1]}x"
+                    f"{dims[2]} cells of {1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, "
+                    f"{grid[4].size} objects larger than a cell tested directly)")
+        return _Grid(grid, recs, plan, vis_o, pos_of, box), False
+
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
                       packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                       is_dir: np.ndarray, frame: tuple[np.ndarray, bool],
@@ -553,8 +623,8 @@ class Scheduler(SceneAPI):
             n_sel, box, packed, compete, is_dir, frame)
         out = None if records is None else self._scratch(
             records, 8 * n_sel, np.float32 if frame[1] else np.float64)
-        grid, recs = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
-                                  dims, frame, out)
+        grid, recs, _ = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
+                                     dims, frame, out)
         if plan is None:
             plan = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
                     f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {grid[4].size} objects "
@@ -644,9 +714,10 @@ class Scheduler(SceneAPI):
                  ) -> tuple[tuple[np.ndarray, ...], dict[int, tuple[np.ndarray, np.ndarray]], str]:
         """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
         per-light lists to keep, and the plan: directional lights scan every object against
-        their cascade sweeps; point and spot lights walk the light pass's grid of visible
-        objects, then a grid of the same kind over the invisible casting objects that meet
-        their spheres' bounding box (objects need not be visible to cast). Lights with
+        their cascade sweeps; point and spot lights walk the light pass's grid, and when it
+        holds the visible objects only, a grid of the same kind over the invisible casting
+        objects that meet their spheres' bounding box (objects need not be visible to
+        cast). Lights with
         ``recompute`` False take their lists from ``cached``."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
@@ -680,19 +751,20 @@ class Scheduler(SceneAPI):
                 rows_l = rows_t[local].astype(np.int64)
                 vols = (vn[local], vq[local], vm[local], shared[local])
                 parts = [self._grid_casters(lights_packed, rows_l, grid.grid, grid.vis, vols)]
-                # The invisible casting objects near the lights' spheres, as a grid of their
-                # own (same construction as the grid of visible objects).
+                # A grid of the visible objects only: the invisible casting objects near the
+                # lights' spheres, as a grid of their own (the same construction).
                 radius = lights.radius[rows_l]
                 reach = lights.position[rows_l]
                 r_box = np.concatenate([(reach - radius[:, None]).min(0),
                                         (reach + radius[:, None]).max(0)])
-                hidden = hidden_near(lo, hi, casts, vis_o, r_box)
+                hidden = (hidden_near(lo, hi, casts, vis_o, r_box) if grid.shown is None
+                          else np.zeros(0, np.int64))
                 nh = hidden.size
                 if nh:
                     f_box = _frame_box(r_box, frame)
                     g_f, dims = grid_shape(f_box[:3], f_box[3:],
                                            CELL_PER_RADIUS * float(np.median(radius)))
-                    h_grid, (h_box, h_bits, h_rows) = _object_grid(
+                    h_grid, (h_box, h_bits, h_rows), _ = _object_grid(
                         lo[hidden], hi[hidden], objs.mask[hidden], np.ones(nh, np.bool_), g_f,
                         dims, frame)
                     parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
@@ -702,7 +774,9 @@ class Scheduler(SceneAPI):
                     masks = np.concatenate([p[1][i] for p in parts])
                     order = np.argsort(rows, kind="stable")
                     found[todo[t]] = (rows[order], masks[order])
-                plan.append(f"{local.size} point/spot: the grid of visible objects, then a grid "
+                plan.append(f"{local.size} point/spot: the grid of every object"
+                            if grid.shown is not None else
+                            f"{local.size} point/spot: the grid of visible objects, then a grid "
                             f"of {nh} invisible casting objects near them")
         counts = np.array([f[0].size for f in found], np.int64)
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -719,8 +793,8 @@ class Scheduler(SceneAPI):
         out = (np.empty(int(offsets[-1]), np.int64), np.empty(int(offsets[-1]), np.uint32))
         objs = self.objects
         count = grid_casters(lights_packed, rows, grid, recs,
-                             (objs.casts_shadows, objs.bounds_min, objs.bounds_max), vols,
-                             offsets, out)
+                             (objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
+                             vols, offsets, out)
         ends = offsets[:-1] + count
         return ([out[0][a:b] for a, b in zip(offsets[:-1], ends, strict=True)],
                 [out[1][a:b] for a, b in zip(offsets[:-1], ends, strict=True)])
@@ -757,12 +831,12 @@ def _grid_shape(n_sel: int, box: np.ndarray, packed: tuple[np.ndarray, np.ndarra
 
 def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,
                  g_f: np.ndarray, dims: np.ndarray, frame: tuple[np.ndarray, bool],
-                 out: np.ndarray | None = None) -> tuple[tuple, tuple]:
+                 out: np.ndarray | None = None) -> tuple[tuple, tuple, np.ndarray]:
     """The selected rows of (lo, hi, mask) sorted into the grid (g_f, dims), and their
     records: (grid (g_f, dims, cell_start, ext, big_pos), (records [V, 8], their integer
-    view, row per position)). Records are float64, or float32 in "fast" precision, written
-    into the front of ``out`` (1-d, of that dtype) if given."""
-    vis_rows, _, cell_start = visible_order(lo, hi, select, g_f, dims, frame)
+    view, row per position), position per row or -1). Records are float64, or float32 in
+    "fast" precision, written into the front of ``out`` (1-d, of that dtype) if given."""
+    vis_rows, pos_of, cell_start = visible_order(lo, hi, select, g_f, dims, frame)
     nv = vis_rows.size
     n_small = int(cell_start[int(dims[0] * dims[1] * dims[2])])
     vis_box = (np.empty((nv, 8), np.float32 if frame[1] else np.float64) if out is None
@@ -770,7 +844,7 @@ def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.nd
     vis_bits = vis_box.view(np.uint32 if frame[1] else np.uint64)
     ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
     big_pos = np.arange(n_small, nv, dtype=np.int32)
-    return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows)
+    return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows), pos_of
 
 
 def _rate(dt: float, fade_time: float) -> float:

@@ -25,6 +25,9 @@ import lightsched as ls
 import lightsched.reference as ref
 from lightsched.shadows import MAX_PLANES, SWEEP_BLOCK, sweep_casters
 
+# Each test runs with both kinds of object grid of the fast path (conftest.py).
+pytestmark = pytest.mark.usefixtures("grid_kind")
+
 SCHEDULERS = pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
 MARGIN = 1e-6
 FAR_AWAY = 1e4  # metres along -direction: the segment towards a directional light

@@ -14,6 +14,9 @@ from helpers import OracleP, Twin, assert_frame_sane, assert_frames_match, camer
 import lightsched as ls
 import lightsched.reference as ref
 
+# Each test runs with both kinds of object grid of the fast path (conftest.py).
+pytestmark = pytest.mark.usefixtures("grid_kind")
+
 GRID = 2.0**-16
 
 

@@ -17,6 +17,9 @@ import lightsched as ls
 import lightsched.reference as ref
 from lightsched.scenes import city, move_lights
 
+# Each test runs with both kinds of object grid of the fast path (conftest.py).
+pytestmark = pytest.mark.usefixtures("grid_kind")
+
 # --------------------------------------------------------------------------- strategies
 
 finite = {"allow_nan": False, "allow_infinity": False}

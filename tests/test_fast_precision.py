@@ -18,6 +18,9 @@ from test_equivalence import big_scene, configs
 import lightsched as ls
 from lightsched.scenes import city, move_lights
 
+# Each test runs with both kinds of object grid of the fast path (conftest.py).
+pytestmark = pytest.mark.usefixtures("grid_kind")
+
 GRID = 2.0**-16
 
 

@@ -6,6 +6,7 @@ path ran and why."""
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import numpy as np
@@ -17,6 +18,9 @@ from test_equivalence import big_scene, configs
 
 import lightsched as ls
 from lightsched.scenes import city, move_lights
+
+# Each test runs with both kinds of object grid of the fast path (conftest.py).
+pytestmark = pytest.mark.usefixtures("grid_kind")
 
 
 class FullEveryFrame(ls.Scheduler):
@@ -301,10 +305,12 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
     assert seen == {"full", "incremental", "unchanged"}, seen
 
 
-def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move():
+def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
     """Every light moving makes a full frame; with the objects and cameras as they were,
     it keeps their visibility and grid (same bits as a frame that builds them) until the
-    lights' radii change the cell edge or the camera moves."""
+    lights' radii change the cell edge (1.5x: beyond CELL_SLACK), or, for a grid of the
+    visible objects only, the camera moves; a grid of every object follows the camera by
+    its records' masks."""
     p = _Pair(ls.Config(max_lights=4))
     scene = city(3_000, 300, seed=3, shadow_fraction=0.05)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
@@ -324,12 +330,54 @@ def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move():
         fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
         frames_identical(fa, fb, f"frame {i} ({change})")
         assert _plan(fa).startswith("full"), fa.stats["plan"]
-        plans.append("(kept: the objects and cameras did not change)" in fa.stats["plan"]["pairs"])
-    assert plans == [False, True, True, False, True, False, True], plans
+        plans.append("(kept: the objects" in fa.stats["plan"]["pairs"])
+    camera_keeps = grid_kind == "every"
+    assert plans == [False, True, True, False, True, camera_keeps, True], plans
+
+
+def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
+    """``cam`` turned about the vertical axis (a narrower view: objects leave and enter)."""
+    f = np.asarray(cam.forward, float)
+    c, s = math.cos(angle), math.sin(angle)
+    return ls.Camera(position=np.asarray(cam.position, float),
+                     forward=np.array([f[0] * c - f[2] * s, f[1], f[0] * s + f[2] * c]),
+                     up=np.asarray(cam.up, float), fov_y=1.0, aspect=cam.aspect, near=cam.near,
+                     far=cam.far)
+
+
+def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
+    """A camera turning back and forth over a city: a grid of every object is kept, and the
+    objects that leave or enter the view only get their record's mask (0 or their own)
+    again. Frames equal the oracle's, casters of shadowed point and spot lights among
+    invisible objects included, and those of a scheduler that builds everything anew."""
+    scene = city(3_000, 300, seed=8, shadow_fraction=0.1)
+    cfg = ls.Config(max_lights=4, shadow_budget=8)
+    t, p = Twin(cfg), _Pair(cfg)
+    for s in (t, p):
+        s.set_lights(**scene.lights)
+        s.set_objects(**scene.objects)
+    updated = []
+    for i, angle in enumerate([0.0, 0.3, 0.6, 0.3, 0.0, 0.5, 0.1]):
+        cams = [_turned_camera(scene.cameras[0], angle)]
+        ff, _ = t.frame(cams)
+        fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i}")
+        frames_identical(fa, ff, f"frame {i}")
+        assert ff.stats["counts"]["casters"] > 0
+        found = re.search(r"kept: the objects did not change; (\d+) records", t.plans[-1])
+        updated.append(int(found[1]) if found else None)
+    assert not t.diverged
+    if grid_kind == "every":
+        assert updated[0] is None and all(u is not None for u in updated[1:]), t.plans
+        assert min(updated[1:]) > 0 and max(updated[1:]) > 100, updated  # left and entered
+        assert "the grid of every object" in ff.stats["plan"]["casters"]
+    else:
+        assert updated == [None] * 7, t.plans
+        assert "invisible casting objects" in ff.stats["plan"]["casters"]
 
 
 def test_a_new_grid_writes_its_records_over_the_last_ones():
-    """With the camera moving every frame the grid of visible objects is built again each
+    """With the camera and a few objects moving every frame the grid is built again each
     frame, into one kept buffer (a fresh one per frame was mapped and faulted in again at
     1M objects), and the frames stay those of a scheduler that builds everything anew."""
     p = _Pair(ls.Config(max_lights=4))
@@ -338,8 +386,11 @@ def test_a_new_grid_writes_its_records_over_the_last_ones():
     p.set_objects(**scene.objects)
     cam = scene.cameras[0]
     addresses, grids = [], []
+    some = scene.objects["id"][::300]
+    lo, hi = scene.objects["bounds_min"][::300], scene.objects["bounds_max"][::300]
     for i in range(8):
         cam = _moved_camera(cam, 2.0)
+        p.update_objects(id=some, bounds_min=lo + 0.1 * (i + 1), bounds_max=hi + 0.1 * (i + 1))
         fa, fb = p.a.frame([cam], dt=1 / 60), p.b.frame([cam], dt=1 / 60)
         frames_identical(fa, fb, f"frame {i}")
         grids.append(p.a._cache.grid)
