@@ -495,7 +495,7 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
 
         out += ["", "**Answer (core frame time):** a full dynamic frame (exact precision, "
                 "K = 8, fade on) takes, with every light moving, " + takes("full")
-                + (", and with the camera moving too (nothing kept), " + takes("all")
+                + (", and with the camera moving too (only the grid of the objects kept), " + takes("all")
                    if any(r["scenario"] == "all" for r in full) else "") + ".", ""]
     inc = incremental_answer(results)
     if inc:
