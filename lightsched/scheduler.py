@@ -751,24 +751,10 @@ class Scheduler(SceneAPI):
                 rows_l = rows_t[local].astype(np.int64)
                 vols = (vn[local], vq[local], vm[local], shared[local])
                 parts = [self._grid_casters(lights_packed, rows_l, grid.grid, grid.vis, vols)]
-                # A grid of the visible objects only: the invisible casting objects near the
-                # lights' spheres, as a grid of their own (the same construction).
-                radius = lights.radius[rows_l]
-                reach = lights.position[rows_l]
-                r_box = np.concatenate([(reach - radius[:, None]).min(0),
-                                        (reach + radius[:, None]).max(0)])
-                hidden = (hidden_near(lo, hi, casts, vis_o, r_box) if grid.shown is None
-                          else np.zeros(0, np.int64))
-                nh = hidden.size
-                if nh:
-                    f_box = _frame_box(r_box, frame)
-                    g_f, dims = grid_shape(f_box[:3], f_box[3:],
-                                           CELL_PER_RADIUS * float(np.median(radius)))
-                    h_grid, (h_box, h_bits, h_rows), _ = _object_grid(
-                        lo[hidden], hi[hidden], objs.mask[hidden], np.ones(nh, np.bool_), g_f,
-                        dims, frame)
-                    parts.append(self._grid_casters(lights_packed, rows_l, h_grid,
-                                                    (h_box, h_bits, hidden[h_rows]), vols))
+                nh = 0
+                if grid.shown is None:
+                    hidden, nh = self._hidden_casters(lights_packed, rows_l, vols, frame, vis_o)
+                    parts += hidden
                 for i, t in enumerate(local):
                     rows = np.concatenate([p[0][i] for p in parts])
                     masks = np.concatenate([p[1][i] for p in parts])
@@ -784,6 +770,30 @@ class Scheduler(SceneAPI):
         masks = np.concatenate([f[1] for f in found]).astype(np.uint32)
         keep = {int(r): f for r, f in zip(shadow_rows.tolist(), found, strict=True)}
         return (offsets, ids, masks), keep, "; ".join(plan)
+
+    def _hidden_casters(self, lights_packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
+                        vols: tuple, frame: tuple[np.ndarray, bool], vis_o: np.ndarray
+                        ) -> tuple[list[tuple[list[np.ndarray], list[np.ndarray]]], int]:
+        """For a grid of the visible objects only: the casters of the point and spot lights
+        ``rows`` among the invisible casting objects near their spheres, from a grid of
+        just those (the same construction), as a list of at most one part of
+        ``_grid_casters``; and how many such objects there are."""
+        lights, objs = self.lights, self.objects
+        lo, hi = objs.bounds_min, objs.bounds_max
+        radius = lights.radius[rows]
+        reach = lights.position[rows]
+        r_box = np.concatenate([(reach - radius[:, None]).min(0),
+                                (reach + radius[:, None]).max(0)])
+        hidden = hidden_near(lo, hi, objs.casts_shadows, vis_o, r_box)
+        nh = hidden.size
+        if nh == 0:
+            return [], 0
+        f_box = _frame_box(r_box, frame)
+        g_f, dims = grid_shape(f_box[:3], f_box[3:], CELL_PER_RADIUS * float(np.median(radius)))
+        h_grid, (h_box, h_bits, h_rows), _ = _object_grid(
+            lo[hidden], hi[hidden], objs.mask[hidden], np.ones(nh, np.bool_), g_f, dims, frame)
+        return [self._grid_casters(lights_packed, rows, h_grid, (h_box, h_bits, hidden[h_rows]),
+                                   vols)], nh
 
     def _grid_casters(self, lights_packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                       grid: tuple, recs: tuple, vols: tuple
