@@ -309,9 +309,9 @@ class Scheduler(SceneAPI):
         # the objects are (a camera move rewrites the masks of the objects that entered or
         # left the view); else of the visible objects, kept while the visible set and its
         # boxes are. A new one writes its records over the kept one's (nothing reads those
-        # once it is made):
-        # at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap threshold) was mapped
-        # and faulted in again every other frame: the records kernel took ~70 ms, not 20.
+        # once it is made): at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap
+        # threshold) was mapped and faulted in again every other frame: the records kernel
+        # took ~70 ms, not 20.
         if full:
             fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
@@ -607,9 +607,7 @@ class Scheduler(SceneAPI):
         grid, recs, pos_of = _object_grid(objs.bounds_min, objs.bounds_max, shown_mask,
                                           np.ones(n, np.bool_), g_f, dims, frame, out)
         if plan is None:
-            plan = (f"grid of every object, the invisible ones masked out ({dims[0]}x{dims[1]}x"
-                    f"{dims[2]} cells of {1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, "
-                    f"{grid[4].size} objects larger than a cell tested directly)")
+            plan = _grid_plan("every object, the invisible ones masked out", grid)
         return _Grid(grid, recs, plan, vis_o, pos_of, box), False
 
     def _visible_grid(self, select: np.ndarray, box: np.ndarray,
@@ -629,9 +627,7 @@ class Scheduler(SceneAPI):
         grid, recs, _ = _object_grid(objs.bounds_min, objs.bounds_max, objs.mask, select, g_f,
                                      dims, frame, out)
         if plan is None:
-            plan = (f"grid of visible objects ({dims[0]}x{dims[1]}x{dims[2]} cells of "
-                    f"{1 / g_f[3]:.3g} m, z {RUN_SPLIT}x finer, {grid[4].size} objects "
-                    "larger than a cell tested directly)")
+            plan = _grid_plan("visible objects", grid)
         return _Grid(grid, recs, plan)
 
     def _walk(self, packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray, grid: _Grid,
@@ -839,6 +835,13 @@ def _grid_shape(n_sel: int, box: np.ndarray, packed: tuple[np.ndarray, np.ndarra
     median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
     g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
     return g_f, dims, None
+
+
+def _grid_plan(what: str, grid: tuple) -> str:
+    """The plan of a grid of ``what``: its cells and how many objects it tests directly."""
+    g_f, dims, big_pos = grid[0], grid[1], grid[4]
+    return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
+            f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
 
 
 def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,
