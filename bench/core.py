@@ -111,9 +111,18 @@ TARGETS = {
 }
 
 
-def make_scene(n: int, l: int, seed: int, shadows: bool, fraction: float = 0.01) -> Any:
+def make_scene(n: int, l: int, seed: int, shadows: bool, fraction: float = 0.01,
+               object_ids: str = "random") -> Any:
+    # object_ids is passed only when asked for: older checkouts' city() has no such argument.
+    ids = {} if object_ids == "random" else {"object_ids": object_ids}
     return city(n, l, seed=seed, shadow_fraction=fraction if shadows else 0.0,
-                sun_shadows=shadows)
+                sun_shadows=shadows, **ids)
+
+
+def add_object_ids(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--object-ids", choices=("random", "spatial"), default="random",
+                   help="the city's object ids: random (default) or ascending in Z order over "
+                        "the ground, as a game that spawns its world section by section")
 
 
 def stage_names(seconds: list[dict[str, float]]) -> list[str]:
@@ -295,7 +304,7 @@ def prime(args: argparse.Namespace) -> None:
     n = min(min(n for n, _ in args.sizes), 10_000)
     l = min(min(l for _, l in args.sizes), 1_000)
     t0 = time.perf_counter()
-    scene = make_scene(n, l, args.seed, not args.no_shadows)
+    scene = make_scene(n, l, args.seed, not args.no_shadows, object_ids=args.object_ids)
     for name in dict.fromkeys(["full", *args.scenarios]):
         run_sequence(lightsched.Scheduler, scene, Config(max_lights=args.max_lights), 5,
                      INCREMENTAL_WARMUP, motion=Motion(name, scene, args.seed))
@@ -307,7 +316,7 @@ def bench_size(n: int, l: int, scenarios: list[str], args: argparse.Namespace
                ) -> list[dict[str, Any]]:
     say(f"\n== N={fmt_count(n)} objects, L={fmt_count(l)} lights, K={args.max_lights}")
     t0 = time.perf_counter()
-    scene = make_scene(n, l, args.seed, not args.no_shadows)
+    scene = make_scene(n, l, args.seed, not args.no_shadows, object_ids=args.object_ids)
     say(f"   scene built in {time.perf_counter() - t0:.2f} s "
         f"({int(scene.lights['shadows'].sum())} shadowed lights)")
     motions = {name: Motion(name, scene, args.seed) for name in scenarios}
@@ -358,8 +367,8 @@ SHADOW_FRACTION = 0.05  # enough shadowed lights that S = 16 fills at (10k, 1k)
 def bench_shadow_stage(n: int, l: int, budgets: list[int], args: argparse.Namespace
                        ) -> dict[str, Any]:
     say(f"\n== shadow stage: N={fmt_count(n)}, L={fmt_count(l)}, S in {budgets}")
-    plain = make_scene(n, l, args.seed, False)
-    shadowed = make_scene(n, l, args.seed, True, SHADOW_FRACTION)
+    plain = make_scene(n, l, args.seed, False, object_ids=args.object_ids)
+    shadowed = make_scene(n, l, args.seed, True, SHADOW_FRACTION, args.object_ids)
     cases = [("none", plain, Config(max_lights=args.max_lights))]
     cases += [(f"S={b}", shadowed, Config(max_lights=args.max_lights, shadow_budget=b))
               for b in budgets]
@@ -398,7 +407,7 @@ def bench_compare(n: int, l: int, args: argparse.Namespace) -> dict[str, Any] | 
     except ImportError as e:
         say(f"   skipped: lightsched.reference is not available ({e})")
         return None
-    scene = make_scene(n, l, args.seed, not args.no_shadows)
+    scene = make_scene(n, l, args.seed, not args.no_shadows, object_ids=args.object_ids)
     config = Config(max_lights=args.max_lights)
     frames = args.compare_frames
     say("   oracle ...")
@@ -429,13 +438,14 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
     cmd = "python bench/core.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
     shadows = "none" if args.no_shadows else "the sun and ~1% of the other lights"
     upto = fmt_count(args.incremental_up_to)
+    ids = "" if args.object_ids == "random" else f", object_ids={args.object_ids!r}"
     out = [BEGIN, "", f"Generated {time.strftime('%Y-%m-%d %H:%M %Z')} by `{cmd}` at commit "
            f"`{git_commit()}`.", "",
            f"Machine: {m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads), "
            f"{m['os']}; Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}; load "
            f"average (1 min) {args.load[0]:.2f} at the start, {args.load[-1]:.2f} at the end.",
            "",
-           f"Scenes: `lightsched.scenes.city(N, L, seed={args.seed})` (10% spots, one sun; "
+           f"Scenes: `lightsched.scenes.city(N, L, seed={args.seed}{ids})` (10% spots, one sun; "
            f"shadowed: {shadows}), one camera (fov_y 60 degrees, 16:9, 1080 px); "
            f"K = {args.max_lights}, default Config (fade on, exact precision, shadow_budget 4). "
            "Only `Scheduler.frame` is timed; the scene change before it is not. Per size the "
@@ -585,6 +595,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-lights", type=int, default=8, help="K (default 8)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-shadows", action="store_true", help="no light casts shadows")
+    add_object_ids(p)
     p.add_argument("--shadow-budgets", type=str, default="4,16",
                    help="shadow budgets S of the shadow-stage table, or 'none' (default 4,16)")
     p.add_argument("--compare", type=str, default="1000:100",

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 from common import fmt_count, git_commit, parse_sizes, say
-from core import DT, Motion, make_scene, parse_scenarios
+from core import DT, Motion, add_object_ids, make_scene, parse_scenarios
 from history import extract, resolve
 from paired import load_base
 
@@ -46,9 +46,9 @@ def thp_faults() -> int:
 
 
 def frames(pkg: Any, n: int, l: int, scenario: str, count: int, warmup: int, seed: int,
-           stages: list[str]) -> list[dict[str, float]]:
+           stages: list[str], object_ids: str = "random") -> list[dict[str, float]]:
     """Per timed frame: ms, minor faults, huge-page faults and the stages' ms."""
-    scene = make_scene(n, l, seed, True)
+    scene = make_scene(n, l, seed, True, object_ids=object_ids)
     s = pkg.Scheduler(pkg.Config(max_lights=8))
     s.set_lights(**scene.lights)
     s.set_objects(**scene.objects)
@@ -80,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stages", default="grid,pairs,lists,objects",
                    help="stats['seconds'] stages to list (default grid,pairs,lists,objects)")
     p.add_argument("--seed", type=int, default=0)
+    add_object_ids(p)
     p.add_argument("--workdir", default=None,
                    help="where to extract --base (kept, with its numba cache)")
     args = p.parse_args(argv)
@@ -93,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
             pkg, what = lightsched, f"working tree {git_commit()}"
         for n, l in parse_sizes(args.sizes):
             for scenario in parse_scenarios(args.scenarios):
-                rows = frames(pkg, n, l, scenario, args.frames, args.warmup, args.seed, stages)
+                rows = frames(pkg, n, l, scenario, args.frames, args.warmup, args.seed, stages,
+                              args.object_ids)
                 say(f"{what}, ({fmt_count(n)}, {fmt_count(l)}) {scenario}:")
                 say("| frame | ms | minor faults | 2 MB faults | "
                     + " | ".join(f"{k} ms" for k in stages) + " |")

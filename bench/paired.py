@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from common import fmt_count, git_commit, machine, parse_sizes, say
-from core import DT, Motion, make_scene, parse_scenarios
+from core import DT, Motion, add_object_ids, make_scene, parse_scenarios
 from history import extract, resolve
 
 import lightsched
@@ -52,9 +52,9 @@ def load_base(path: Path) -> Any:
 
 
 def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
-           seed: int) -> dict[str, Any]:
+           seed: int, object_ids: str = "random") -> dict[str, Any]:
     """Frames of both sides alternated; per side the frame times and stage seconds."""
-    scene = make_scene(n, l, seed, True)
+    scene = make_scene(n, l, seed, True, object_ids=object_ids)
     sides = {}
     for side, pkg in packages.items():
         s = pkg.Scheduler(pkg.Config(max_lights=8))
@@ -103,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=5,
                    help="untimed frames first (at least the scenario's own warm-up)")
     p.add_argument("--seed", type=int, default=0)
+    add_object_ids(p)
     p.add_argument("--workdir", default=None,
                    help="where to extract the base (kept, with its numba cache; default a "
                         "temporary folder)")
@@ -113,13 +114,15 @@ def main(argv: list[str] | None = None) -> int:
         packages = {"new": lightsched, "base": load_base(extract(base, workdir))}
         m = machine()
         say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); working tree "
-            f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...)")
+            f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
+            f"ids {args.object_ids}")
         say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
             "| mean difference ms | stages that moved most (base -> working tree, ms) |")
         say("|---|---|---|---|---|---|---|---|")
         for n, l in parse_sizes(args.sizes):
             for scenario in parse_scenarios(args.scenarios):
-                r = paired(packages, n, l, scenario, args.frames, args.warmup, args.seed)
+                r = paired(packages, n, l, scenario, args.frames, args.warmup, args.seed,
+                           args.object_ids)
                 q = r["diff_q_ms"]
                 say(f"| {fmt_count(n)} | {fmt_count(l)} | {scenario} | {r['base_ms']:.2f} "
                     f"| {r['new_ms']:.2f} | {r['diff_ms']:+.2f} ({q[0]:+.2f}..{q[1]:+.2f}) "

@@ -67,6 +67,18 @@ def _ids(rng: np.random.Generator, n: int) -> np.ndarray:
     return rng.permutation(2 * n + 16)[:n].astype(np.int32)
 
 
+def _z_order(centre: np.ndarray, cell: float) -> np.ndarray:
+    """Z-order (Morton) key of each centre's (x, z) column of edge ``cell``: interleaved
+    bits, so rows sorted by it walk the ground plane in nested squares."""
+    q = np.floor((centre[:, [0, 2]] - centre[:, [0, 2]].min(0, initial=np.inf)) / cell)
+    q = q.astype(np.uint64)
+    key = np.zeros(centre.shape[0], np.uint64)
+    for b in range(32):
+        for a in range(2):
+            key |= ((q[:, a] >> np.uint64(b)) & np.uint64(1)) << np.uint64(2 * b + a)
+    return key
+
+
 def city_camera(side: float, height: float = 200.0, fov_y_deg: float = 60.0,
                 aspect: float = 16.0 / 9.0, near: float = 0.5, far: float = 3000.0,
                 camera_id: int = 0) -> Camera:
@@ -79,8 +91,8 @@ def city_camera(side: float, height: float = 200.0, fov_y_deg: float = 60.0,
 
 
 def city(n_objects: int, n_lights: int, seed: int = 0, spot_fraction: float = 0.1,
-         directional: int = 1, shadow_fraction: float = 0.0, sun_shadows: bool = False
-         ) -> CityScene:
+         directional: int = 1, shadow_fraction: float = 0.0, sun_shadows: bool = False,
+         object_ids: str = "random") -> CityScene:
     """A city of ``n_objects`` boxes and ``n_lights`` lights on a square centred at the origin.
 
     Objects: half-extents uniform in 0.5..5 m per axis, centres uniform over the square
@@ -93,6 +105,11 @@ def city(n_objects: int, n_lights: int, seed: int = 0, spot_fraction: float = 0.
     5..30 m; every light has intensity 1..100. ``shadow_fraction`` of the point and spot
     lights get ``shadows=True``, and the suns if ``sun_shadows`` (both off by default: the
     shadow stage then does no work).
+
+    ``object_ids``: "random" (default), the ids in no spatial order; "spatial", the same ids
+    and boxes with the ids ascending along a Z-order curve of the centres over 16 m
+    columns, as a game that spawns its world section by section numbers its objects. The
+    stores keep rows by id, so this is the order the core's object rows take.
 
     Every row carries finite values in every field (DESIGN section 3): directional rows get
     a position and radius they ignore; point rows a straight-down direction.
@@ -113,6 +130,10 @@ def city(n_objects: int, n_lights: int, seed: int = 0, spot_fraction: float = 0.
     centre[:, 1] = rng.uniform(0.0, 100.0, n_objects)
     centre[:, 2] = rng.uniform(-h, h, n_objects)
     half = rng.uniform(0.5, 5.0, (n_objects, 3))
+    if object_ids == "spatial":
+        oid = np.sort(oid)[np.argsort(np.argsort(_z_order(centre, 16.0), kind="stable"))]
+    elif object_ids != "random":
+        raise ValueError('object_ids must be "random" or "spatial"')
     objects = {"id": oid, "bounds_min": centre - half, "bounds_max": centre + half}
 
     # --- lights
@@ -158,7 +179,7 @@ def city(n_objects: int, n_lights: int, seed: int = 0, spot_fraction: float = 0.
 
     params = {"n_objects": n_objects, "n_lights": n_lights, "spot_fraction": spot_fraction,
               "directional": n_dir, "shadow_fraction": shadow_fraction,
-              "sun_shadows": bool(sun_shadows)}
+              "sun_shadows": bool(sun_shadows), "object_ids": object_ids}
     return CityScene(lights=lights, objects=objects, cameras=[city_camera(side)], side=side,
                      seed=seed, params=params)
 

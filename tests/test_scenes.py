@@ -22,6 +22,8 @@ SMALL: dict[str, Callable[[int], CityScene]] = {
     "stadium": lambda seed: stadium(400, seed=seed),
     "large_world": lambda seed: large_world(400, 60, seed=seed, shadow_fraction=0.1, sun_shadows=True),
     "split_screen": lambda seed: split_screen(400, 60, seed=seed, shadow_fraction=0.1, sun_shadows=True),
+    "city_spatial_ids": lambda seed: city(400, 60, seed=seed, shadow_fraction=0.1, sun_shadows=True,
+                                          object_ids="spatial"),
 }
 
 
@@ -243,7 +245,27 @@ def test_stadium_fast_equals_oracle(seed):
     assert t.frames == 3 and not t.diverged, f"stadium seed {seed}: {t.tied_rows} near-tie rows"
 
 
-@pytest.mark.parametrize("name", ["large_world", "split_screen"])
+def test_city_spatial_ids_are_the_same_objects_numbered_along_the_ground():
+    """object_ids="spatial" renumbers the same boxes with the same ids so that rows in id
+    order (the stores' order) walk the city in Z order: neighbours in id are neighbours
+    on the ground, which the random ids are not."""
+    a, b = city(3000, 10, seed=7), city(3000, 10, seed=7, object_ids="spatial")
+    assert np.array_equal(np.sort(a.objects["id"]), np.sort(b.objects["id"]))
+    for k in ("bounds_min", "bounds_max"):
+        assert np.array_equal(a.objects[k], b.objects[k])
+    assert _same(city(3000, 10, seed=7, object_ids="random"), a)
+
+    def step(sc: CityScene) -> float:
+        o = np.argsort(sc.objects["id"])
+        c = (sc.objects["bounds_min"][o] + sc.objects["bounds_max"][o])[:, [0, 2]] / 2
+        return float(np.median(np.linalg.norm(np.diff(c, axis=0), axis=1)))
+
+    assert step(b) < 16.0 < 2 * 16.0 < step(a)
+    with pytest.raises(ValueError, match="object_ids"):
+        city(10, 1, object_ids="sorted")
+
+
+@pytest.mark.parametrize("name", ["large_world", "split_screen", "city_spatial_ids"])
 @pytest.mark.parametrize("seed", [0, 2])
 def test_city_variants_fast_equal_oracle(name, seed):
     sc = SMALL[name](seed)
