@@ -38,6 +38,7 @@ import numba as nb
 import numpy as np
 
 from .fade import fade_object, steady_slots
+from .frustum import SERIAL_LIGHTS
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
 from .scene import DIRECTIONAL, ON, SPOT
 from .select import (
@@ -314,26 +315,34 @@ def _column_run(hot, j, c, x, y, dxx, rr, grid):
     return cell_start[base + z0], cell_start[base + z1 + 1]
 
 
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _light_bound(hot, j, grid, n_vis):
+    g_f, dims, cell_start, ext, big_pos = grid
+    if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
+        return n_vis
+    c = _light_cells(hot, j, g_f, dims, ext)
+    total = big_pos.shape[0]
+    # The whole cube, not the sphere cut: a looser bound is cheaper to count.
+    for x in range(c[0], c[3] + 1):
+        for y in range(c[1], c[4] + 1):
+            base = (x * dims[1] + y) * dims[2]
+            total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
+    return total
+
+
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def light_bounds(hot, rows, grid, n_vis):
     """Offsets [len(rows) + 1] of each light's segment in the pair buffers: the prefix sum
     of an upper bound of the pairs it can emit (objects centred in the cells of its
-    widened cube plus the big objects; every visible object for a directional light)."""
-    g_f, dims, cell_start, ext, big_pos = grid
+    widened cube plus the big objects; every visible object for a directional light).
+    Parallel from SERIAL_LIGHTS lights."""
     out = np.zeros(rows.shape[0], np.int64)
-    for t in nb.prange(rows.shape[0]):
-        j = rows[t]
-        if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
-            out[t] = n_vis
-            continue
-        c = _light_cells(hot, j, g_f, dims, ext)
-        total = big_pos.shape[0]
-        # The whole cube, not the sphere cut: a looser bound is cheaper to count.
-        for x in range(c[0], c[3] + 1):
-            for y in range(c[1], c[4] + 1):
-                base = (x * dims[1] + y) * dims[2]
-                total += cell_start[base + c[5] + 1] - cell_start[base + c[2]]
-        out[t] = total
+    if rows.shape[0] < SERIAL_LIGHTS:
+        for t in range(rows.shape[0]):
+            out[t] = _light_bound(hot, rows[t], grid, n_vis)
+    else:
+        for t in nb.prange(rows.shape[0]):
+            out[t] = _light_bound(hot, rows[t], grid, n_vis)
     offsets = np.zeros(rows.shape[0] + 1, np.int64)
     for t in range(rows.shape[0]):
         offsets[t + 1] = offsets[t] + out[t]

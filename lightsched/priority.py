@@ -21,43 +21,56 @@ import math
 import numba as nb
 import numpy as np
 
-from .frustum import CameraFrames
+from .frustum import SERIAL_LIGHTS, CameraFrames
 from .scene import DIRECTIONAL, LightStore
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
 
 
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
+    typ, position, radius, direction, outer, inner, intensity, prio, mask, ids = store
+    for k in range(3):
+        hot[j, k] = position[j, k] - origin[k]
+        lf[j, k] = direction[j, k]
+    hot[j, 3] = radius[j]
+    hot[j, 4] = mask[j]
+    hot[j, 5] = j * 32 + typ[j] * 8
+    hot[j, 6] = intensity[j]
+    hot[j, 7] = prio[j]
+    lf[j, 3] = math.cos(outer[j])
+    lf[j, 4] = math.sin(outer[j])
+    cos_i = math.cos(inner[j])
+    # The step profile: inner == outer, or so close that the cosines are equal.
+    lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
+    lf[j, 6] = ids[j]
+    if typ[j] != DIRECTIONAL:
+        cam_pos, cam_basis, cam_tan, cam_focus = cams
+        best = -np.inf
+        for c in range(cam_pos.shape[0]):
+            a = thesis_camera_term(position[j], radius[j], cam_pos[c], cam_basis[c],
+                                   cam_tan[c], cam_focus[c], thesis_w[0], thesis_w[1],
+                                   thesis_w[2])
+            if a > best:
+                best = a
+        lf[j, 7] = best
+
+
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _pack(typ, position, radius, direction, outer, inner, intensity, prio, mask, ids,
-          cam_pos, cam_basis, cam_tan, cam_focus, thesis_w, origin):
-    n = typ.shape[0]
+def _pack(store, cams, thesis_w, origin):
+    """store = the light store's (type, position, radius, direction, outer_angle,
+    inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,
+    tan_xy, focus), none for the contribution model."""
+    n = store[0].shape[0]
     hot = np.zeros((n, 8))
     lf = np.zeros((n, 8))
-    for j in nb.prange(n):
-        for k in range(3):
-            hot[j, k] = position[j, k] - origin[k]
-            lf[j, k] = direction[j, k]
-        hot[j, 3] = radius[j]
-        hot[j, 4] = mask[j]
-        hot[j, 5] = j * 32 + typ[j] * 8
-        hot[j, 6] = intensity[j]
-        hot[j, 7] = prio[j]
-        lf[j, 3] = math.cos(outer[j])
-        lf[j, 4] = math.sin(outer[j])
-        cos_i = math.cos(inner[j])
-        # The step profile: inner == outer, or so close that the cosines are equal.
-        lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
-        lf[j, 6] = ids[j]
-        if typ[j] != DIRECTIONAL:
-            best = -np.inf
-            for c in range(cam_pos.shape[0]):
-                a = thesis_camera_term(position[j], radius[j], cam_pos[c], cam_basis[c],
-                                       cam_tan[c], cam_focus[c], thesis_w[0], thesis_w[1],
-                                       thesis_w[2])
-                if a > best:
-                    best = a
-            lf[j, 7] = best
+    if n < SERIAL_LIGHTS:
+        for j in range(n):
+            _pack_row(j, hot, lf, store, cams, thesis_w, origin)
+    else:
+        for j in nb.prange(n):
+            _pack_row(j, hot, lf, store, cams, thesis_w, origin)
     return hot, lf
 
 
@@ -70,10 +83,11 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
     is x)."""
     cams = slice(None) if camera_term else slice(0)
-    return _pack(lights.type, lights.position, lights.radius, lights.direction,
-                 lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
-                 lights.mask, lights.id, frames.position[cams], frames.basis[cams],
-                 frames.tan_xy[cams], frames.focus[cams], np.array([w_ecc, w_dist, c1]),
+    store = (lights.type, lights.position, lights.radius, lights.direction,
+             lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
+             lights.mask, lights.id)
+    return _pack(store, (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
+                         frames.focus[cams]), np.array([w_ecc, w_dist, c1]),
                  np.zeros(3) if origin is None else origin)
 
 

@@ -418,7 +418,7 @@ class Scheduler(SceneAPI):
             start, heap = self._group(fresh, n)
             seg = np.empty((n, 2), np.int64)
             seg[:, 0] = start[:-1]
-            seg[:, 1] = np.diff(start)
+            np.subtract(start[1:], start[:-1], out=seg[:, 1])
             used = heap[0].size
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "grouped by object (every pair new)"
@@ -469,8 +469,10 @@ class Scheduler(SceneAPI):
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
             caster_offsets=casters[0], caster_ids=casters[1], caster_masks=casters[2])
         freeze(frame)
-        settled = np.array_equal(np.sort(self._shadow_prev[0]), np.sort(lights.id[shadow_rows]))
-        self._shadow_prev = (lights.id[shadow_rows], shadow_tier.astype(np.int64))
+        prev_ids, shadow_ids = self._shadow_prev[0], lights.id[shadow_rows]
+        settled = prev_ids.size == shadow_ids.size and (
+            shadow_ids.size == 0 or np.array_equal(np.sort(prev_ids), np.sort(shadow_ids)))
+        self._shadow_prev = (shadow_ids, shadow_tier.astype(np.int64))
         self._cache = _Cache(
             lights={f: getattr(lights, f) for f in LIGHT_FIELDS},
             objects={f: getattr(objs, f) for f in OBJECT_FIELDS}, cam_key=key,
@@ -595,7 +597,8 @@ class Scheduler(SceneAPI):
             g = c.grid
             rows = (np.zeros(0, np.int64) if vis_o is g.shown
                     else np.flatnonzero(vis_o != g.shown))
-            g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
+            if rows.size:
+                g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
             plan = g.plan.split(" (kept", 1)[0] + (
                 f" (kept: the objects did not change; {rows.size} records' visibility "
                 "updated)")
