@@ -381,6 +381,41 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
     assert np.array_equal(heap[1], light[order])
 
 
+
+def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
+    """Below SERIAL_LIGHTS lights the per-light kernels loop on the calling thread (the
+    oracle tests' scenes), from it in parallel: a prefix of the lights gets the same rows
+    from the serial loop as from the parallel one."""
+    from lightsched.frustum import SERIAL_LIGHTS, lights_visible
+    from lightsched.pairs import light_bounds
+    from lightsched.priority import _pack
+
+    scene = city(3000, 3 * SERIAL_LIGHTS, seed=4, shadow_fraction=0.05)
+    s = ls.Scheduler(ls.Config(max_lights=8, model="thesis"))
+    s.set_lights(**scene.lights)
+    s.set_objects(**scene.objects)
+    s.frame(scene.cameras)
+    c, lights = s._cache, s.lights
+    n, few = len(lights), SERIAL_LIGHTS - 1
+    f = c.frames
+
+    def pack(m: int) -> tuple[np.ndarray, np.ndarray]:
+        store = tuple(a[:m] for a in (lights.type, lights.position, lights.radius,
+                                      lights.direction, lights.outer_angle, lights.inner_angle,
+                                      lights.intensity, lights.priority, lights.mask, lights.id))
+        return _pack(store, (f.position, f.basis, f.tan_xy, f.focus),
+                     np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3))
+
+    for a, b in zip(pack(n), pack(few), strict=True):
+        assert np.array_equal(a[:few], b, equal_nan=True)
+    vis = [lights_visible(lights.type[:m], lights.position[:m], lights.radius[:m], f.plane_n,
+                          f.plane_p) for m in (n, few)]
+    assert np.array_equal(vis[0][:few], vis[1]) and vis[1].any() and not vis[1].all()
+    hot, n_vis = c.packed[0], c.grid.vis[0].shape[0]
+    bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.grid, n_vis)
+              for m in (n, few)]
+    assert np.array_equal(bounds[0][:few + 1], bounds[1]) and bounds[1][-1] > 0
+
 def test_grid_with_big_objects_big_lights_and_directional_in_slots():
     """Objects larger than a cell are tested by every light directly; huge lights walk
     every cell; directional lights in slots take every visible object."""
