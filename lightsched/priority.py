@@ -61,7 +61,7 @@ def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
 def _pack(store, cams, thesis_w, origin):
     """store = the light store's (type, position, radius, direction, outer_angle,
     inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,
-    tan_xy, focus), none for the contribution model."""
+    tan_xy, focus), zero cameras for the contribution model (column 7 stays -inf)."""
     n = store[0].shape[0]
     hot = np.zeros((n, 8))
     lf = np.zeros((n, 8))
