@@ -74,6 +74,12 @@ def _pack(store, cams, thesis_w, origin):
     return hot, lf
 
 
+def light_columns(lights: LightStore) -> tuple[np.ndarray, ...]:
+    """The store's columns ``_pack`` reads, in its order."""
+    return (lights.type, lights.position, lights.radius, lights.direction, lights.outer_angle,
+            lights.inner_angle, lights.intensity, lights.priority, lights.mask, lights.id)
+
+
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
                 c1: float, camera_term: bool = True, origin: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -83,10 +89,7 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
     is x)."""
     cams = slice(None) if camera_term else slice(0)
-    store = (lights.type, lights.position, lights.radius, lights.direction,
-             lights.outer_angle, lights.inner_angle, lights.intensity, lights.priority,
-             lights.mask, lights.id)
-    return _pack(store, (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
+    return _pack(light_columns(lights), (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
                          frames.focus[cams]), np.array([w_ecc, w_dist, c1]),
                  np.zeros(3) if origin is None else origin)
 

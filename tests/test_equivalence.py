@@ -381,14 +381,13 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
     assert np.array_equal(heap[1], light[order])
 
 
-
 def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     """Below SERIAL_LIGHTS lights the per-light kernels loop on the calling thread (the
     oracle tests' scenes), from it in parallel: a prefix of the lights gets the same rows
     from the serial loop as from the parallel one."""
     from lightsched.frustum import SERIAL_LIGHTS, lights_visible
     from lightsched.pairs import light_bounds
-    from lightsched.priority import _pack
+    from lightsched.priority import _pack, light_columns
 
     scene = city(3000, 3 * SERIAL_LIGHTS, seed=4, shadow_fraction=0.05)
     s = ls.Scheduler(ls.Config(max_lights=8, model="thesis"))
@@ -400,9 +399,7 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     f = c.frames
 
     def pack(m: int) -> tuple[np.ndarray, np.ndarray]:
-        store = tuple(a[:m] for a in (lights.type, lights.position, lights.radius,
-                                      lights.direction, lights.outer_angle, lights.inner_angle,
-                                      lights.intensity, lights.priority, lights.mask, lights.id))
+        store = tuple(a[:m] for a in light_columns(lights))
         return _pack(store, (f.position, f.basis, f.tan_xy, f.focus),
                      np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3))
 
@@ -415,6 +412,7 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.grid, n_vis)
               for m in (n, few)]
     assert np.array_equal(bounds[0][:few + 1], bounds[1]) and bounds[1][-1] > 0
+
 
 def test_grid_with_big_objects_big_lights_and_directional_in_slots():
     """Objects larger than a cell are tested by every light directly; huge lights walk
