@@ -14,7 +14,9 @@ The work is light-major, in four kernels:
 2. ``light_pass`` (parallel over lights): a light walks the columns of cells that can hold
    the centre of an object it reaches (its sphere widened by the largest object
    half-extent, cut column by column), each column one contiguous run of objects; the
-   exact range test (d2 <= r*r) filters, then the rest of Affects and P (priority.py). Each
+   exact range test (d2 <= r*r) filters, then the rest of Affects and P (priority.py); a
+   point light under the contribution model takes its run eight records a step in
+   vector code (simd.py), the same arithmetic lane by lane. Each
    light writes its own segment of the pair buffers, sized beforehand by ``light_bounds``,
    so the result does not depend on the thread count. The light is fixed in the inner
    loop: its type and data stay in registers, and the objects it meets are neighbours in
@@ -40,7 +42,7 @@ import numpy as np
 from .fade import fade_object, steady_slots
 from .frustum import SERIAL_LIGHTS
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
-from .scene import DIRECTIONAL, ON, SPOT
+from .scene import DIRECTIONAL, ON, POINT, SPOT
 from .select import (
     F_NEW_P,
     F_NEW_W,
@@ -62,6 +64,7 @@ from .select import (
     topk_insert,
 )
 from .shadows import caster_bits, pick_slot_shadows
+from .simd import point_run
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -467,10 +470,17 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_obj, pair_p, n,
                keep, model, w_obj, w_int):
-    """The pairs of light j with the objects at positions v0..v1-1, appended at n: the
-    range test (exact, DESIGN's d2 <= r*r) compacts the survivors and their d2 into ``keep``
-    without branching (a test that fails at random would mispredict); the rest of Affects
-    and P run on survivors only. Returns (new n, keep, regrown when short)."""
+    """The pairs of light j with the objects at positions v0..v1-1, appended at n. A point
+    light under the contribution model with float64 records runs them eight at a time
+    (simd.point_run). Otherwise the range test (exact, DESIGN's d2 <= r*r) compacts the
+    survivors and their d2 into ``keep`` without branching (a test that fails at random
+    would mispredict); the rest of Affects and P run on survivors only. Returns (new n,
+    keep, regrown when short)."""
+    if typ == POINT and model == MODEL_CONTRIBUTION:
+        light = (hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], hot[j, 4], hot[j, 6], hot[j, 7])
+        end = point_run(vis_box, vis_rows, v0, v1, light, pair_obj, pair_p, n)
+        if end >= 0:
+            return end, keep
     p0 = hot[j, 0]
     p1 = hot[j, 1]
     p2 = hot[j, 2]

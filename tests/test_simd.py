@@ -1,0 +1,137 @@
+"""simd.point_run (a point light's run of records in vector code) == the scalar rule it
+replaces (priority.box_d2, the mask, priority.falloff + p_user: the point light's branch
+of pairs._exact_pair), bit for bit, on generated records and runs; with both ways of
+packing the lanes (an AVX-512 register where the target has it, the portable
+compress store), and without a store past the pairs it appends."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+import pytest
+from helpers import examples
+from hypothesis import given
+from hypothesis import strategies as st
+
+import lightsched.simd as simd
+from lightsched.pairs import visible_objects
+from lightsched.priority import box_d2, falloff
+
+finite = {"allow_nan": False, "allow_infinity": False}
+SENTINEL_ROW = -7
+SENTINEL_P = -123.0
+
+
+@nb.njit(nogil=True, error_model="numpy")
+def scalar_run(box, bits, rows, v0, v1, light, out_obj, out_p, n):
+    """The scalar rule, record by record, as pairs._exact_pair applies it to a point light
+    under the contribution model."""
+    x, y, z, r, mask, intensity, p_user = light
+    lm = np.int64(mask)
+    for v in range(v0, v1):
+        d2 = box_d2(box, v, x, y, z)
+        if d2 <= r * r and np.int64(bits[v, 6]) & lm != 0:
+            out_obj[n] = rows[v]
+            out_p[n] = falloff(intensity, r, d2, box[v, 7]) + p_user
+            n += 1
+    return n
+
+
+def _compiled(in_register: bool):
+    """A fresh kernel around point_run, lowered with the given packing (the flag is read
+    when the intrinsic is lowered)."""
+    before = simd.PACK_IN_REGISTER
+    simd.PACK_IN_REGISTER = in_register
+    try:
+        @nb.njit(nogil=True, error_model="numpy")
+        def run(box, rows, v0, v1, light, out_obj, out_p, n):
+            return simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
+
+        box = np.zeros((1, 8))
+        run(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
+            np.zeros(1), 0)
+        return run
+    finally:
+        simd.PACK_IN_REGISTER = before
+
+
+PACKINGS = [False] + ([True] if simd._has_avx512(simd.target_features()) else [])
+KERNELS = {packing: _compiled(packing) for packing in PACKINGS}
+
+
+@st.composite
+def records_and_run(draw):
+    n = draw(st.integers(1, 40))
+    origin = draw(st.sampled_from([0.0, 0.0, 1e7, -3e5]))
+    coord = st.one_of(st.integers(-6, 6).map(float), st.floats(-30.0, 30.0, **finite))
+    extent = st.one_of(st.just(0.0), st.integers(0, 4).map(float), st.floats(0.0, 20.0, **finite),
+                       st.just(200.0))
+    lo = np.array([[draw(coord) + origin for _ in range(3)] for _ in range(n)])
+    hi = lo + np.array([[draw(extent) for _ in range(3)] for _ in range(n)])
+    masks = np.array([draw(st.sampled_from([0xFFFFFFFF, 1, 2, 6, 0, 0x80000001]))
+                      for _ in range(n)], np.uint32)
+    rows = np.array(draw(st.permutations(range(n))), np.int64) * 3 + 1
+    v0 = draw(st.integers(0, n))
+    v1 = draw(st.integers(v0, n))
+    light = (draw(coord) + origin, draw(coord) + origin, draw(coord) + origin,
+             draw(st.one_of(st.floats(1e-3, 60.0, **finite), st.sampled_from([1.0, 5.0, 25.0]))),
+             float(draw(st.sampled_from([0xFFFFFFFF, 1, 2, 0x80000000, 0]))),
+             draw(st.one_of(st.just(0.0), st.floats(0.0, 100.0, **finite))),
+             draw(st.one_of(st.just(0.0), st.floats(-3.0, 3.0, **finite))))
+    return lo, hi, masks, rows, v0, v1, light
+
+
+@examples(3.0)
+@given(case=records_and_run(), start=st.integers(0, 5))
+def test_point_run_equals_the_scalar_rule(case, start):
+    lo, hi, masks, rows, v0, v1, light = case
+    n = lo.shape[0]
+    recs = np.zeros((n, 8))
+    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+                    np.zeros(3))
+    bits = recs.view(np.int64)
+    size = start + (v1 - v0) + 16
+    want_obj = np.full(size, SENTINEL_ROW, np.int32)
+    want_p = np.full(size, SENTINEL_P)
+    want = scalar_run(recs, bits, rows, v0, v1, light, want_obj, want_p, start)
+    for packing, kernel in KERNELS.items():
+        got_obj = np.full(size, SENTINEL_ROW, np.int32)
+        got_p = np.full(size, SENTINEL_P)
+        got = kernel(recs, rows, v0, v1, light, got_obj, got_p, start)
+        assert got == want, packing
+        # Same pairs in the same order, P bit for bit, and nothing written outside them.
+        assert np.array_equal(got_obj, want_obj), packing
+        assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
+
+
+@pytest.mark.parametrize("packing", PACKINGS)
+def test_point_run_reads_to_the_last_record_and_no_further(packing):
+    """A run ending at the last record of the array (its final step reads fewer than eight
+    records) and runs of every length from 0 to 17 give the scalar rule's pairs."""
+    rng = np.random.default_rng(3)
+    n = 37
+    lo = rng.uniform(-10, 10, (n, 3))
+    hi = lo + rng.uniform(0, 3, (n, 3))
+    recs = np.zeros((n, 8))
+    visible_objects(lo, hi, np.full(n, 0xFFFFFFFF, np.uint32), np.arange(n), n,
+                    (recs, recs.view(np.int64)), np.zeros(3))
+    rows = np.arange(n, dtype=np.int64)
+    light = (0.0, 0.0, 0.0, 1e4, float(0xFFFFFFFF), 1.0, 0.0)
+    for v0, v1 in [(0, n), (n - 3, n), (n - 9, n)] + [(5, 5 + k) for k in range(18)]:
+        want_obj, got_obj = np.zeros(n, np.int32), np.zeros(n, np.int32)
+        want_p, got_p = np.zeros(n), np.zeros(n)
+        want = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, want_obj, want_p, 0)
+        assert want == v1 - v0  # a light reaching every record
+        assert KERNELS[packing](recs, rows, v0, v1, light, got_obj, got_p, 0) == want
+        assert np.array_equal(got_obj, want_obj) and np.array_equal(got_p, want_p)
+
+
+def test_point_run_leaves_float32_records_to_the_scalar_loop():
+    """"fast" precision's float32 records are not handled (-1, nothing written): the light
+    pass then runs its scalar loop on them."""
+    recs = np.zeros((4, 8), np.float32)
+    out_obj, out_p = np.full(4, SENTINEL_ROW, np.int32), np.full(4, SENTINEL_P)
+    light = (0.0, 0.0, 0.0, 10.0, float(0xFFFFFFFF), 1.0, 0.0)
+    for kernel in KERNELS.values():
+        assert kernel(recs, np.arange(4), 0, 4, light, out_obj, out_p, 0) == -1
+    assert (out_obj == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
