@@ -203,16 +203,15 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
     """Appends the pairs of one point light with the records at positions v0..v1-1 of
     ``box`` ([V, 8] float64, C order; box_rows int64 [V] their object rows) to out_obj
     (int32) / out_p (float64) from n; returns the new n. light = (x, y, z, r, mask, i,
-    p_user) as float64 (light_hot columns 0-4, 6, 7). The caller guarantees the room: at
-    most one pair per record. Float32 records ("fast" precision) are typed too, so that a
-    kernel holding both branches compiles, and return -1 at once: not handled, the caller
-    runs its scalar loop."""
-    ok = (isinstance(box, types.Array) and box.dtype in (types.float64, types.float32)
-          and box.ndim == 2
-          and box.layout == "C" and isinstance(box_rows, types.Array)
+    p_user) as float64 (light_hot columns 0-4, 6, 7); every array contiguous. The caller
+    guarantees the room: at most one pair per record. Float32 records ("fast" precision)
+    are typed too, so that a kernel holding both branches compiles, and return -1 at once:
+    not handled, the caller runs its scalar loop."""
+    arrays = (box, box_rows, out_obj, out_p)
+    ok = (all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
+          and box.dtype in (types.float64, types.float32) and box.ndim == 2
           and box_rows.dtype == types.int64 and box_rows.ndim == 1
-          and isinstance(out_obj, types.Array) and out_obj.dtype == types.int32
-          and isinstance(out_p, types.Array) and out_p.dtype == types.float64
+          and out_obj.dtype == types.int32 and out_p.dtype == types.float64
           and isinstance(light, types.UniTuple) and light.count == 7
           and light.dtype == types.float64)
     if not ok:
