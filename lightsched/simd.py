@@ -33,9 +33,9 @@ register, 6.6 with masked loads of whole records, a transpose and a register.
 
 from __future__ import annotations
 
-import llvmlite.binding as llvm
 from llvmlite import ir
 from numba.core import cgutils, config, types
+from numba.core.codegen import get_host_cpu_features
 from numba.core.extending import intrinsic
 
 from .priority import R0
@@ -54,13 +54,12 @@ _VB = ir.VectorType(ir.IntType(1), LANES)
 
 
 def target_features() -> str:
-    """The CPU features numba compiles for: NUMBA_CPU_FEATURES if set, none if only
-    NUMBA_CPU_NAME is set (a portable build), else the host's (as numba's codegen does)."""
+    """The CPU features numba compiles for: NUMBA_CPU_FEATURES if set, else the host's as
+    numba's codegen reads them (NUMBA_CPU_NAME alone keeps the host's features, and
+    NUMBA_ENABLE_AVX=0 turns the AVX ones off)."""
     if config.CPU_FEATURES is not None:
         return config.CPU_FEATURES
-    if config.CPU_NAME is not None:
-        return ""
-    return llvm.get_host_cpu_features().flatten()
+    return get_host_cpu_features()
 
 
 def _has_avx512(features: str) -> bool:

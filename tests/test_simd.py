@@ -135,3 +135,49 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
     for kernel in KERNELS.values():
         assert kernel(recs, np.arange(4), 0, 4, light, out_obj, out_p, 0) == -1
     assert (out_obj == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
+
+
+HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
+           "+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,-avx512f,-avx512vl")
+WITHOUT_AVX512 = """
+import numpy as np
+import lightsched.simd as simd
+from lightsched.pairs import visible_objects
+from test_simd import KERNELS, scalar_run
+assert not simd.PACK_IN_REGISTER and list(KERNELS) == [False]
+assert "zmm" not in "".join(KERNELS[False].inspect_asm().values())
+rng = np.random.default_rng(5)
+n = 200
+lo = rng.uniform(-20, 20, (n, 3))
+hi = lo + rng.uniform(0, 6, (n, 3))
+recs = np.zeros((n, 8))
+visible_objects(lo, hi, rng.integers(0, 4, n).astype(np.uint32), np.arange(n), n,
+                (recs, recs.view(np.int64)), np.zeros(3))
+rows = rng.permutation(n).astype(np.int64)
+for _ in range(300):
+    v0 = int(rng.integers(0, n)); v1 = int(rng.integers(v0, n + 1))
+    light = (*rng.uniform(-20, 20, 3), float(rng.uniform(0.5, 15)), float(rng.integers(1, 4)),
+             float(rng.uniform(0, 10)), 0.0)
+    want = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
+    got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
+    k = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want, 3)
+    assert KERNELS[False](recs, rows, v0, v1, light, *got, 3) == k
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+print("ok")
+"""
+
+
+def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
+    """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
+    packing, emits no 512-bit code, and gives the scalar rule's pairs."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = dict(os.environ, NUMBA_CPU_NAME="haswell", NUMBA_CPU_FEATURES=HASWELL,
+               NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(Path(__file__).parent))
+    done = subprocess.run([sys.executable, "-c", WITHOUT_AVX512], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().endswith("ok")
