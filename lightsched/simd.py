@@ -173,28 +173,28 @@ class _Run:
         of them)."""
         b = self.b
         vty = values.type
+        suffix, size = _element(vty)
         ptr = b.bitcast(out, ir.PointerType(vty))
-        align = ir.Constant(_I32, _bytes(vty))
+        align = ir.Constant(_I32, size)
         if self.in_register:
-            name = f"llvm.x86.avx512.mask.compress.v8{_suffix(vty)}"
+            name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
             packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
                             [values, ir.Constant(vty, [0] * LANES), hit])
             first = b.icmp_signed("<", self.iota, _splat(b, count, _VI64))
-            store = _declare(b, f"llvm.masked.store.v8{_suffix(vty)}.p0", ir.VoidType(),
+            store = _declare(b, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
                              [vty, ir.PointerType(vty), _I32, _VB])
             b.call(store, [packed, ptr, align, first])
         else:
-            store = _declare(b, f"llvm.masked.compressstore.v8{_suffix(vty)}", ir.VoidType(),
+            store = _declare(b, f"llvm.masked.compressstore.v8{suffix}", ir.VoidType(),
                              [vty, ir.PointerType(vty.element), _VB])
             b.call(store, [values, out, hit])
 
 
-def _suffix(vty: ir.VectorType) -> str:
-    return "f64" if isinstance(vty.element, ir.DoubleType) else f"i{vty.element.width}"
-
-
-def _bytes(vty: ir.VectorType) -> int:
-    return 8 if isinstance(vty.element, ir.DoubleType) else vty.element.width // 8
+def _element(vty: ir.VectorType) -> tuple[str, int]:
+    """(intrinsic name suffix, bytes) of a vector's element: f64 or iN."""
+    if isinstance(vty.element, ir.DoubleType):
+        return "f64", 8
+    return f"i{vty.element.width}", vty.element.width // 8
 
 
 @intrinsic(prefer_literal=False)

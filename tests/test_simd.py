@@ -55,7 +55,8 @@ def _compiled(in_register: bool):
         simd.PACK_IN_REGISTER = before
 
 
-PACKINGS = [False] + ([True] if simd._has_avx512(simd.target_features()) else [])
+# The register packing only where numba compiles for AVX-512 (it could not run elsewhere).
+PACKINGS = [False] + ([True] if simd.PACK_IN_REGISTER else [])
 KERNELS = {packing: _compiled(packing) for packing in PACKINGS}
 
 
