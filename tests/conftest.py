@@ -1,16 +1,42 @@
 """Suite-wide hypothesis profile (see tests/helpers.py): deadline off, blobs printed,
-example counts scaled by the LIGHTSCHED_EXAMPLES environment variable. And the
-``grid_kind`` fixture: the oracle modules run once per kind of object grid."""
+example counts scaled by the LIGHTSCHED_EXAMPLES environment variable. The ``grid_kind``
+fixture: the oracle modules run once per kind of object grid. And a guard against stale
+numba caches (below)."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
-from helpers import register_profile
 
-from lightsched import scheduler
+
+def _drop_stale_numba_cache() -> None:
+    """numba keys a cached kernel on its own source file only, so a kernel of pairs.py that
+    inlines fade.py, select.py or simd.py keeps running the old helpers after they are
+    edited (a mutation of fade.py passed the oracle tests that way). The cache is dropped
+    whenever any source of the package changed since it was written; the digest sits
+    beside it. Runs before a kernel is called; xdist's workers find the digest current."""
+    package = Path(__file__).resolve().parent.parent / "lightsched"
+    cache = package / "__pycache__"
+    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sorted(package.glob("*.py"))))
+    stamp = cache / "numba-sources.sha256"
+    if stamp.exists() and stamp.read_text() == digest.hexdigest():
+        return
+    for stale in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:
+        stale.unlink(missing_ok=True)
+    cache.mkdir(exist_ok=True)
+    stamp.write_text(digest.hexdigest())
+
+
+_drop_stale_numba_cache()
+
+# After the guard, so that no kernel has been loaded from the cache yet.
+from helpers import register_profile  # noqa: E402
+
+from lightsched import scheduler  # noqa: E402
 
 register_profile()
 
