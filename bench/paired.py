@@ -17,6 +17,10 @@ bench/core.py's, the difference is what this measures.
 
 Use it for changes of a few percent, which separate processes (bench/history.py) cannot
 resolve here: their run medians spread by +-10% from one minute to the next.
+Its own resolution, from A/A runs (``--base HEAD`` on a clean tree: the same code on both
+sides): at (100k, 10k) one run's median difference moves by up to ~0.5 ms with no change,
+its quartiles sometimes excluding zero (bench/RESULTS.md); repeat a run before trusting a
+difference of that size.
 """
 
 from __future__ import annotations
