@@ -89,8 +89,9 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
     is x)."""
     cams = slice(None) if camera_term else slice(0)
-    return _pack(light_columns(lights), (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
-                         frames.focus[cams]), np.array([w_ecc, w_dist, c1]),
+    cam_columns = (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
+                   frames.focus[cams])
+    return _pack(light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
                  np.zeros(3) if origin is None else origin)
 
 
