@@ -71,6 +71,7 @@ GROUP_PARTS = 2              # independent histograms when grouping pairs by obj
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)
+STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -706,7 +707,7 @@ def _select(p, j, ids, sf, si, nbest, h, h_abs):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def object_pass(run, objs, lists, lights, state, out, params, shadow):
+def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
@@ -721,7 +722,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
     priority f32, fade_weight f32, fade_state, count, candidates, slot_shadow int8, fading
     bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in, dt/fade_out,
     fade_in, fade_out); shadow = (shadow map index per light row or -1,
-    max_shadowed_per_object).
+    max_shadowed_per_object); k_static = a tuple of K zeros if K is in STATIC_K, else ().
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
@@ -741,7 +742,12 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow):
     fade_in = params[4]
     fade_out = params[5]
     n_run = run.shape[0]
-    k = s_id.shape[1]
+    # A common K is a compile-time constant, the length of a tuple (its type holds it):
+    # every per-slot loop then has a known trip count, which LLVM unrolls and vectorises
+    # whole (-0.4 ms of ~6.7 at (100k, 10k), bench/RESULTS.md). Each such K costs a
+    # compilation of this kernel (~13 s, then cached), so only STATIC_K are; any other K
+    # is read from the arrays. (numba.literally would re-type every call: ~1.5 s each.)
+    k = len(k_static) if len(k_static) else s_id.shape[1]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))

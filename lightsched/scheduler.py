@@ -43,6 +43,7 @@ from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visib
 from .pairs import (
     GROUP_PARTS,
     RUN_SPLIT,
+    STATIC_K,
     affects_any,
     compact_heap,
     grid_casters,
@@ -457,7 +458,8 @@ class Scheduler(SceneAPI):
                                _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
             object_pass(run, (vis_o, reset), (seg, heap), (lights.id, live), state,
                         tuple(out[name] for name in _OUT) + (fading,), params,
-                        (shadow_of_row, cfg.max_shadowed_per_object))
+                        (shadow_of_row, cfg.max_shadowed_per_object),
+                        (0,) * k if k in STATIC_K else ())
         t = _lap(seconds, "objects", t)
 
         objs.put("slot_light", out["light_ids"])
