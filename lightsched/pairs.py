@@ -39,7 +39,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .fade import fade_object, steady_slots
+from .fade import fade_object, held_slots, steady_slots
 from .frustum import SERIAL_LIGHTS
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
 from .scene import DIRECTIONAL, ON, POINT, SPOT
@@ -726,7 +726,8 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
-    result is fade.steady_slots) and read only last frame's ids and states.
+    result is fade.held_slots: last frame's order, sorted again by this frame's P) and
+    read only last frame's ids and states.
     """
     visible, reset = objs
     seg, (heap_p, heap_j) = lists
@@ -790,9 +791,9 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                         j = np.int64(heap_j[t])
                         if live[j]:
                             nbest = _select(heap_p[t], j, ids, sf, si, nbest, h, h_abs)
-                steady = reset[o]
-                if not steady and all_on and n_old == nbest:
-                    # Steady when every old slot holds a selected light (filled slots come
+                held = False
+                if not reset[o] and all_on and n_old == nbest:
+                    # Held when every old slot holds a selected light (filled slots come
                     # first; ids are unique, so counting them is a set comparison).
                     matched = 0
                     for m in range(n_old):
@@ -800,9 +801,12 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                         for t in range(nbest):
                             hit |= si[I_ID, t] == si[I_OLD_ID, m]
                         matched += hit
-                    steady = matched == nbest
-                if steady:
+                    held = matched == nbest
+                if reset[o]:
                     steady_slots(sf, si, nbest)
+                    cnt = nbest
+                elif held:
+                    held_slots(sf, si, nbest)
                     cnt = nbest
                 else:
                     for m in range(k):
