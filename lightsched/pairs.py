@@ -761,8 +761,6 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
             if visible[o]:
                 a = seg[o, 0]
                 b = a + seg[o, 1]
-                for t in range(a, b):
-                    cand += live[heap_j[t]]
                 n_old = 0
                 all_on = True
                 for m in range(k):
@@ -771,20 +769,23 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                     si[I_OLD_ROW, m] = -1
                     n_old += lid >= 0
                     all_on &= (lid < 0) | (s_st[o, m] == ON)
+                # One pass counts the competing lights and keeps them while they fit in K,
+                # the common case: then every one is selected, no keys, no ranking.
+                for t in range(a, b):
+                    j = np.int64(heap_j[t])
+                    if live[j]:
+                        if cand < k:
+                            p = heap_p[t]
+                            lid = np.int64(ids[j])
+                            _match_old_slot(p, j, lid, sf, si)
+                            sf[F_P, cand] = p
+                            si[I_ID, cand] = lid
+                            si[I_ROW, cand] = j
+                        cand += 1
                 if cand <= k:
-                    # Every competing light is selected: no keys, no ranking to keep.
-                    for t in range(a, b):
-                        j = np.int64(heap_j[t])
-                        if not live[j]:
-                            continue
-                        p = heap_p[t]
-                        lid = np.int64(ids[j])
-                        _match_old_slot(p, j, lid, sf, si)
-                        sf[F_P, nbest] = p
-                        si[I_ID, nbest] = lid
-                        si[I_ROW, nbest] = j
-                        nbest += 1
+                    nbest = cand
                 else:
+                    # (The first K old-slot matches are made again, to the same values.)
                     for m in range(k):
                         si[I_PREV_SEL, m] = s_sel[o, m]
                     for t in range(a, b):
