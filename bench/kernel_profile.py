@@ -1,0 +1,186 @@
+"""Where a kernel's time goes, instruction by instruction: a sampling profile of one numba
+kernel on the captured inputs of a real frame.
+
+    python bench/kernel_profile.py                         # object_pass, city (10k, 1k), 1 thread
+    python bench/kernel_profile.py --kernel group_pairs --size 100k:10k --seconds 8
+
+The scheduler runs a few frames of `bench/core.py`'s `full` scenario (every light moving)
+on a city; the named kernel's arguments are captured on the last one (the arrays it
+updates in place are copied before each call, so every call sees the same input). The
+kernel is then called in a loop while ``perf record -e cpu-clock`` samples the process:
+a software clock, so it works on this VM, which has no hardware counters (``perf stat``
+reports cycles "not supported"). The samples' instruction addresses fall in numba's
+JIT code, which has no symbols for perf; the pages that hold most samples are read back
+from the process and disassembled (objdump), each instruction with its sample count.
+Printed: the hottest 128-byte windows of code with their share, and the annotated listing
+of each, written to ``--out`` (default /tmp/kernel_profile.txt) in full.
+
+Reading it: a sample lands on the instruction after the one that stalled (skid), so a
+store that waits on a chain of compares, or a branch after a load, carries the cost of
+what feeds it. Found with it (bench/RESULTS.md): the object pass's rank counting of the
+steady slots (a sixth of the pass) and its two passes over each object's pairs.
+Needs ``perf`` (Debian ``linux-perf``) and ``objdump`` (binutils); not run by the tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import ctypes
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+from common import parse_sizes, say
+
+import lightsched
+import lightsched.scheduler as scheduler_module
+from lightsched.scenes import city, move_lights
+
+WINDOW = 128  # bytes of code per reported window
+
+
+def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[Any, tuple]:
+    """The kernel (as the scheduler calls it) and its arguments on the last of ``frames``
+    full frames (every light moving) of city(n_objects, n_lights)."""
+    kern = getattr(scheduler_module, kernel)
+    seen: dict[str, tuple] = {}
+
+    def grab(*args):
+        seen["args"] = args
+        return kern(*args)
+
+    setattr(scheduler_module, kernel, grab)
+    try:
+        scene = city(n_objects, n_lights, seed=0)
+        s = lightsched.Scheduler(lightsched.Config(max_lights=8))
+        s.set_lights(**scene.lights)
+        s.set_objects(**scene.objects)
+        for i in range(frames):
+            s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, i + 1))
+            s.frame(scene.cameras, dt=1 / 60)
+    finally:
+        setattr(scheduler_module, kernel, kern)
+    if "args" not in seen:
+        raise SystemExit(f"{kernel} was not called in a full frame")
+    return kern, seen["args"]
+
+
+def fresh(args: tuple) -> tuple:
+    """The arguments with every array copied (tuples of arrays too): the kernel may write
+    any of them in place."""
+    def copy(x):
+        if isinstance(x, np.ndarray):
+            return x.copy()
+        if isinstance(x, tuple):
+            return tuple(copy(y) for y in x)
+        return x
+    return copy(args)
+
+
+def sample(call, seconds: float, data: str) -> tuple[list[int], int]:
+    """Instruction addresses of perf's cpu-clock samples of this process while ``call``
+    runs in a loop for ``seconds``, and the number of calls."""
+    perf = subprocess.Popen(["perf", "record", "-e", "cpu-clock", "-F", "20000", "-p",
+                             str(os.getpid()), "-o", data],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(1.0)  # perf attaches
+    t0 = time.perf_counter()
+    calls = 0
+    while time.perf_counter() - t0 < seconds:
+        call()
+        calls += 1
+    perf.send_signal(signal.SIGINT)
+    perf.wait()
+    out = subprocess.run(["perf", "script", "-i", data, "-F", "ip"], capture_output=True,
+                         text=True, check=True).stdout
+    return [int(x, 16) for x in out.split()], calls
+
+
+def listing(ips: list[int], share: float) -> tuple[list[tuple[int, int, str]], int]:
+    """(address, samples, instruction) over the adjacent code pages that hold at least
+    ``share`` of the samples each and the most in all, disassembled from this process's
+    memory; and the samples there."""
+    pages = collections.Counter(ip >> 12 for ip in ips)
+    hot = sorted(p for p, c in pages.items() if c >= share * len(ips))
+    if not hot:
+        raise SystemExit("no code page holds enough samples")
+    # Runs of adjacent pages (only pages that ran code are read: they are mapped); the run
+    # with the most samples is the kernel's (libc's copies and Python are elsewhere).
+    runs = [[hot[0]]]
+    for p in hot[1:]:
+        if p == runs[-1][-1] + 1:
+            runs[-1].append(p)
+        else:
+            runs.append([p])
+    best = max(runs, key=lambda r: sum(pages[p] for p in r))
+    lo, hi = best[0] << 12, (best[-1] + 1) << 12
+    with tempfile.NamedTemporaryFile(suffix=".bin") as f:
+        f.write(ctypes.string_at(lo, hi - lo))
+        f.flush()
+        dis = subprocess.run(["objdump", "-D", "-b", "binary", "-mi386:x86-64",
+                              "--no-show-raw-insn", f"--adjust-vma={lo}", f.name],
+                             capture_output=True, text=True, check=True).stdout
+    count = collections.Counter(ips)
+    rows = []
+    for line in dis.splitlines():
+        m = re.match(r"\s*([0-9a-f]+):\s*(.*)", line)
+        if m:
+            ad = int(m.group(1), 16)
+            rows.append((ad, count.get(ad, 0), m.group(2)))
+    return rows, sum(c for ip, c in count.items() if lo <= ip < hi)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--kernel", default="object_pass",
+                    help="a kernel the scheduler calls (lightsched.scheduler's name for it)")
+    ap.add_argument("--size", default="10k:1k", help="N:L of the city")
+    ap.add_argument("--frames", type=int, default=6, help="frames before the capture")
+    ap.add_argument("--seconds", type=float, default=5.0, help="sampling time")
+    ap.add_argument("--windows", type=int, default=12, help="hottest windows printed")
+    ap.add_argument("--out", default=os.path.join(tempfile.gettempdir(),
+                                                  "kernel_profile.txt"))
+    a = ap.parse_args()
+    for tool in ("perf", "objdump"):
+        if shutil.which(tool) is None:
+            raise SystemExit(f"{tool} not found (Debian: linux-perf, binutils)")
+    (n, n_lights), = parse_sizes(a.size)
+    kern, args = capture(a.kernel, n, n_lights, a.frames)
+    kern(*fresh(args))  # compiled and warm
+
+    def call():
+        kern(*fresh(args))
+
+    with tempfile.TemporaryDirectory() as tmp:
+        ips, calls = sample(call, a.seconds, os.path.join(tmp, "perf.data"))
+    rows, in_pages = listing(ips, 0.01)
+    total = sum(c for _, c, _ in rows) or 1
+    say(f"{a.kernel} at ({a.size}), {os.environ.get('NUMBA_NUM_THREADS', 'all')} numba "
+        f"threads: {calls} calls, {len(ips)} samples, {in_pages} in the hot code pages "
+        "(the rest: copying the inputs, Python, the kernel's helpers elsewhere)")
+    windows = collections.Counter()
+    for ad, c, _ in rows:
+        windows[ad // WINDOW] += c
+    acc = 0
+    with open(a.out, "w") as f:
+        for w, c in windows.most_common(a.windows):
+            acc += c
+            say(f"  {w * WINDOW:#x}  {c / total:6.1%}  (cumulative {acc / total:6.1%})")
+            f.write(f"--- window {w * WINDOW:#x}: {c / total:.1%} of the samples in the "
+                    "hot pages\n")
+            for ad, n_s, ins in rows:
+                if ad // WINDOW == w:
+                    f.write(f"{n_s:7d}  {ad & 0xffff:04x}: {ins}\n")
+    say(f"annotated windows: {a.out}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
