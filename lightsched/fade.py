@@ -62,9 +62,9 @@ def steady_slots(sf, si, nsel):
     output order (P descending, ties to the lower id), written to the new-slot rows.
     This is step 3 (an object that starts with its selected lights on); an object whose
     slots were all on and hold exactly its selection gets the same from held_slots. Each
-    light's place is
-    the number of lights that rank before it: compares only, no branch on the data (an
-    insertion sort mispredicts about once per light on random priorities)."""
+    light's place is the number of lights that rank before it: compares only, no branch
+    on the data (an insertion sort mispredicts about once per light on random
+    priorities, and step 3 has no earlier order to start from)."""
     for i in range(nsel):
         p = sf[F_P, i]
         lid = si[I_ID, i]
