@@ -4,9 +4,9 @@ kernel on the captured inputs of a real frame.
     python bench/kernel_profile.py                         # object_pass, city (10k, 1k), 1 thread
     python bench/kernel_profile.py --kernel group_pairs --size 100k:10k --seconds 8
 
-The scheduler runs a few frames of `bench/core.py`'s `full` scenario (every light moving)
-on a city; the named kernel's arguments are captured on the last one (the arrays it
-updates in place are copied before each call, so every call sees the same input). The
+The scheduler runs a few full frames on a city (every light moving, as in `bench/core.py`'s
+`full` scenario); the named kernel's arguments are captured on the last one (every array
+is copied before each call, so every call sees the same input). The
 kernel is then called in a loop while ``perf record -e cpu-clock`` samples the process:
 a software clock, so it works on this VM, which has no hardware counters (``perf stat``
 reports cycles "not supported"). The samples' instruction addresses fall in numba's
