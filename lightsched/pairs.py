@@ -64,7 +64,7 @@ from .select import (
     topk_insert,
 )
 from .shadows import caster_bits, pick_slot_shadows
-from .simd import point_run
+from .simd import point_priority, point_run
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -456,6 +456,14 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
             n, keep = _run_pairs(cell_start[base + z0], cell_start[base + z1 + 1], hot, lf, j,
                                  lm, typ, vis_box, vis_bits, vis_rows, pair_obj, pair_p, n,
                                  keep, model, w_obj, w_int)
+    if vis_box.itemsize == 8:
+        # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
+        if typ == POINT and model == MODEL_CONTRIBUTION:
+            point_priority(vis_box, vis_rows, _point_light(hot, j), pair_obj, pair_p,
+                           offsets[t], n)
+        else:
+            n = _finish_hits(hot, lf, j, typ, offsets[t], n, vis_box, vis_rows, pair_obj,
+                             pair_p, model, w_obj, w_int)
     r = hot[j, 3]
     rr_exact = r * r
     for b in range(big_pos.shape[0]):
@@ -469,19 +477,41 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _point_light(hot, j):
+    """Light j as simd.point_run and point_priority take it."""
+    return hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], hot[j, 4], hot[j, 6], hot[j, 7]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _finish_hits(hot, lf, j, typ, n0, n1, vis_box, vis_rows, pair_obj, pair_p, model, w_obj,
+                 w_int):
+    """The hits simd.point_run left at n0..n1-1, (position, d2), through the rest of
+    Affects and P (_pair_p: the spot cone, the thesis model), kept ones compacted in place
+    as (object row, P). Returns the new end."""
+    m = n0
+    for i in range(n0, n1):
+        v = pair_obj[i]
+        hit, p = _pair_p(hot, lf, j, typ, v, pair_p[i], vis_box, model, w_obj, w_int)
+        if hit:
+            pair_obj[m] = vis_rows[v]
+            pair_p[m] = p
+            m += 1
+    return m
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_obj, pair_p, n,
                keep, model, w_obj, w_int):
-    """The pairs of light j with the objects at positions v0..v1-1, appended at n. A point
-    light under the contribution model with float64 records runs them eight at a time
-    (simd.point_run). Otherwise the range test (exact, DESIGN's d2 <= r*r) compacts the
-    survivors and their d2 into ``keep`` without branching (a test that fails at random
-    would mispredict); the rest of Affects and P run on survivors only. Returns (new n,
-    keep, regrown when short)."""
-    if typ == POINT and model == MODEL_CONTRIBUTION:
-        light = (hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], hot[j, 4], hot[j, 6], hot[j, 7])
-        end = point_run(vis_box, vis_rows, v0, v1, light, pair_obj, pair_p, n)
-        if end >= 0:
-            return end, keep
+    """The pairs of light j with the objects at positions v0..v1-1, appended at n. Float64
+    records go eight at a time through simd.point_run (the range test and the mask), which
+    appends (position, d2) of the hits; _one_light finishes them after the walk. Float32
+    records ("fast") take the scalar loop: the range test (exact, DESIGN's d2 <= r*r)
+    compacts the survivors and their d2 into ``keep`` without branching (a test that fails
+    at random would mispredict); the rest of Affects and P run on survivors only. Returns
+    (new n, keep, regrown when short)."""
+    end = point_run(vis_box, vis_rows, v0, v1, _point_light(hot, j), pair_obj, pair_p, n)
+    if end >= 0:
+        return end, keep
     p0 = hot[j, 0]
     p1 = hot[j, 1]
     p2 = hot[j, 2]

@@ -124,8 +124,8 @@ class _Run:
         self.minnum = _declare(b, "llvm.minnum.v8f64", _VF, [_VF, _VF])
         self.load_f = _declare(b, "llvm.masked.load.v8f64.p0", _VF,
                                [ir.PointerType(_VF), _I32, _VB, _VF])
-        self.load_i = _declare(b, "llvm.masked.load.v8i64.p0", _VI64,
-                               [ir.PointerType(_VI64), _I32, _VB, _VI64])
+        self.load_i32 = _declare(b, "llvm.masked.load.v8i32.p0", _VI32,
+                                 [ir.PointerType(_VI32), _I32, _VB, _VI32])
         self.popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
 
     def records(self, box: ir.Value, v: ir.Value, left: ir.Value) -> list[ir.Value]:
@@ -139,9 +139,35 @@ class _Run:
             recs.append(b.call(self.load_f, [ptr, ir.Constant(_I32, 8), live, self.zero]))
         return _transpose(b, recs)
 
-    def pairs(self, f: list[ir.Value], lanes: ir.Value) -> tuple[ir.Value, ir.Value]:
-        """(hit per lane, P per lane) of the light and the records' fields f: box_d2,
-        d2 <= r*r, the mask, then falloff + p_user (priority.py)."""
+    def masked(self, load: ir.Function, ptr: ir.Value, lanes: ir.Value,
+               fill: ir.Value) -> ir.Value:
+        """The lanes of the vector at ``ptr`` (``fill`` elsewhere)."""
+        size = _element(fill.type)[1]
+        return self.b.call(load, [ptr, ir.Constant(_I32, size), lanes, fill])
+
+    def gather(self, base: ir.Value, at: ir.Value, lanes: ir.Value, fill: ir.Value
+               ) -> ir.Value:
+        """base[at[k]] in lane k (``fill`` where a lane is off)."""
+        b = self.b
+        suffix, size = _element(fill.type)
+        pty = base.type
+        addr = b.add(_splat(b, b.ptrtoint(base, _I64), _VI64),
+                     b.mul(at, ir.Constant(_VI64, [size] * LANES)))
+        ptrs = b.inttoptr(addr, ir.VectorType(pty, LANES))
+        fn = _declare(b, f"llvm.masked.gather.v8{suffix}.v8p0", fill.type,
+                      [ptrs.type, _I32, _VB, fill.type])
+        return b.call(fn, [ptrs, ir.Constant(_I32, size), lanes, fill])
+
+    def store(self, values: ir.Value, ptr: ir.Value, lanes: ir.Value) -> None:
+        """Stores the lanes of ``values`` at ``ptr``."""
+        suffix, size = _element(values.type)
+        fn = _declare(self.b, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
+                      [values.type, ptr.type, _I32, _VB])
+        self.b.call(fn, [values, ptr, ir.Constant(_I32, size), lanes])
+
+    def hits(self, f: list[ir.Value], lanes: ir.Value) -> tuple[ir.Value, ir.Value]:
+        """(hit per lane, d2 per lane) of the light and the records' fields f: box_d2, then
+        d2 <= r*r and the mask (priority.py)."""
         b = self.b
         d2 = None
         for a in range(3):
@@ -151,7 +177,11 @@ class _Run:
         hit = b.and_(lanes, b.fcmp_ordered("<=", d2, self.rr))
         bits = b.and_(b.bitcast(f[6], _VI64), self.mask)
         hit = b.and_(hit, b.icmp_unsigned("!=", bits, ir.Constant(_VI64, [0] * LANES)))
-        e2 = f[7]
+        return hit, d2
+
+    def priority(self, d2: ir.Value, e2: ir.Value, lanes: ir.Value) -> ir.Value:
+        """P per lane of the pairs at distance d2 from objects of e2: falloff + p_user."""
+        b = self.b
         q = b.fdiv(d2, self.rr)
         w = b.call(self.maxnum, [b.fsub(self.one, b.fmul(q, q)), self.zero])
         g_is_one = b.or_(b.fcmp_ordered("==", e2, self.zero),
@@ -159,14 +189,13 @@ class _Run:
         # g's division only when a pair needs it (an object wider than twice the range:
         # rare), as falloff skips it.
         g_slot = cgutils.alloca_once_value(b, self.one)
-        needs = b.bitcast(b.and_(hit, b.not_(g_is_one)), _I8)
+        needs = b.bitcast(b.and_(lanes, b.not_(g_is_one)), _I8)
         with b.if_then(b.icmp_unsigned("!=", needs, ir.Constant(_I8, 0)), likely=False):
             g_div = b.call(self.minnum, [b.fdiv(self.four_rr, e2), self.one])
             b.store(b.select(g_is_one, self.one, g_div), g_slot)
         g = b.load(g_slot)
         num = b.fmul(b.fmul(b.fmul(self.intensity, w), w), g)
-        p = b.fadd(b.fdiv(num, b.fadd(d2, ir.Constant(_VF, [R0 * R0] * LANES))), self.p_user)
-        return hit, p
+        return b.fadd(b.fdiv(num, b.fadd(d2, ir.Constant(_VF, [R0 * R0] * LANES))), self.p_user)
 
     def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value) -> None:
         """Stores the lanes of ``values`` that hit, in lane order, from ``out`` on (count
@@ -197,23 +226,38 @@ def _element(vty: ir.VectorType) -> tuple[str, int]:
     return f"i{vty.element.width}", vty.element.width // 8
 
 
+def _typed(box, box_rows, light, out_obj, out_p) -> bool:
+    """Whether the arguments are those point_run and point_priority take."""
+    arrays = (box, box_rows, out_obj, out_p)
+    return (all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
+            and box.dtype in (types.float64, types.float32) and box.ndim == 2
+            and box_rows.dtype == types.int64 and box_rows.ndim == 1
+            and out_obj.dtype == types.int32 and out_p.dtype == types.float64
+            and isinstance(light, types.UniTuple) and light.count == 7
+            and light.dtype == types.float64)
+
+
+def _pointers(context, builder, signature, args, at: tuple[int, ...]) -> list[ir.Value]:
+    """Data pointers of the arrays box, box_rows, out_obj, out_p (argument positions
+    ``at``) as double*, i64*, i32*, double*."""
+    kinds = (_F64, _I64, _I32, _F64)
+    return [builder.bitcast(context.make_array(signature.args[k])(context, builder,
+                                                                  args[k]).data,
+                            ir.PointerType(t)) for k, t in zip(at, kinds, strict=True)]
+
+
 @intrinsic(prefer_literal=False)
 def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
-    """Appends the pairs of one point light with the records at positions v0..v1-1 of
-    ``box`` ([V, 8] float64, C order; box_rows int64 [V] their object rows) to out_obj
-    (int32) / out_p (float64) from n; returns the new n. light = (x, y, z, r, mask, i,
-    p_user) as float64 (light_hot columns 0-4, 6, 7); every array contiguous. The caller
-    guarantees the room: at most one pair per record. Float32 records ("fast" precision)
-    are typed too, so that a kernel holding both branches compiles, and return -1 at once:
-    not handled, the caller runs its scalar loop."""
-    arrays = (box, box_rows, out_obj, out_p)
-    ok = (all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
-          and box.dtype in (types.float64, types.float32) and box.ndim == 2
-          and box_rows.dtype == types.int64 and box_rows.ndim == 1
-          and out_obj.dtype == types.int32 and out_p.dtype == types.float64
-          and isinstance(light, types.UniTuple) and light.count == 7
-          and light.dtype == types.float64)
-    if not ok:
+    """Appends the hits of one point light among the records at positions v0..v1-1 of
+    ``box`` ([V, 8] float64, C order) to out_obj (int32) / out_p (float64) from n, as
+    (position, d2): the range test and the mask, not yet P; returns the new n.
+    point_priority then turns each into (object row, P). light = (x, y, z, r, mask, i,
+    p_user) as float64 (light_hot columns 0-4, 6, 7); box_rows (int64 [V], the records'
+    object rows) is point_priority's; every array contiguous. The caller guarantees the
+    room: at most one pair per record. Float32 records ("fast" precision) are typed too,
+    so that a kernel holding both branches compiles, and return -1 at once: not handled,
+    the caller runs its scalar loop."""
+    if not _typed(box, box_rows, light, out_obj, out_p):
         return None
     sig = types.int64(box, box_rows, types.int64, types.int64, light, out_obj, out_p,
                       types.int64)
@@ -221,32 +265,63 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return ir.Constant(_I64, -1)
-        box_a, rows_a, obj_a, p_a = (context.make_array(signature.args[k])(context, builder,
-                                                                             args[k])
-                                     for k in (0, 1, 5, 6))
+        box_ptr, _, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
+                                               (0, 1, 5, 6))
         v0_, v1_, light_, n0 = args[2], args[3], args[4], args[7]
         run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
                    PACK_IN_REGISTER)
-        box_ptr = builder.bitcast(box_a.data, ir.PointerType(_F64))
-        rows_ptr = builder.bitcast(rows_a.data, ir.PointerType(_I64))
-        obj_ptr = builder.bitcast(obj_a.data, ir.PointerType(_I32))
-        p_ptr = builder.bitcast(p_a.data, ir.PointerType(_F64))
         n_slot = cgutils.alloca_once_value(builder, n0)
         with cgutils.for_range_slice(builder, v0_, v1_, ir.Constant(_I64, LANES)) as (v, _):
             left = builder.sub(v1_, v)
             lanes = builder.icmp_signed("<", run.iota, _splat(builder, left, _VI64))
-            hit, p = run.pairs(run.records(box_ptr, v, left), lanes)
-            rows = builder.call(run.load_i, [
-                builder.bitcast(builder.gep(rows_ptr, [v]), ir.PointerType(_VI64)),
-                ir.Constant(_I32, 8), lanes, ir.Constant(_VI64, [0] * LANES)])
+            hit, d2 = run.hits(run.records(box_ptr, v, left), lanes)
             count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
             n = builder.load(n_slot)
-            run.append(builder.trunc(rows, _VI32), hit, builder.gep(obj_ptr, [n]), count)
-            run.append(p, hit, builder.gep(p_ptr, [n]), count)
+            at = builder.add(_splat(builder, v, _VI64), run.iota)
+            run.append(builder.trunc(at, _VI32), hit, builder.gep(obj_ptr, [n]), count)
+            run.append(d2, hit, builder.gep(p_ptr, [n]), count)
             builder.store(builder.add(n, count), n_slot)
         return builder.load(n_slot)
 
     return sig, codegen
 
 
-__all__ = ["LANES", "PACK_IN_REGISTER", "point_run", "target_features"]
+@intrinsic(prefer_literal=False)
+def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
+    """Turns the (position, d2) that point_run left at n0..n1-1 of out_obj / out_p into
+    (object row, P) in place, eight pairs a step: P is computed for the hits only (a
+    quarter of the records in the city), and after the light's whole walk, when its
+    positions are no longer in the store buffer. Arguments as point_run's; for float32
+    records it does nothing (point_run left them to the scalar loop)."""
+    if not _typed(box, box_rows, light, out_obj, out_p):
+        return None
+    sig = types.void(box, box_rows, light, out_obj, out_p, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[0].dtype != types.float64:
+            return context.get_dummy_value()
+        box_ptr, rows_ptr, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
+                                                      (0, 1, 3, 4))
+        light_, n0_, n1_ = args[2], args[5], args[6]
+        run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
+                   PACK_IN_REGISTER)
+        with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
+            lanes = builder.icmp_signed("<", run.iota,
+                                        _splat(builder, builder.sub(n1_, i), _VI64))
+            p_at = builder.bitcast(builder.gep(p_ptr, [i]), ir.PointerType(_VF))
+            obj_at = builder.bitcast(builder.gep(obj_ptr, [i]), ir.PointerType(_VI32))
+            d2 = run.masked(run.load_f, p_at, lanes, run.zero)
+            at = builder.sext(run.masked(run.load_i32, obj_at, lanes,
+                                         ir.Constant(_VI32, [0] * LANES)), _VI64)
+            e2_at = builder.add(builder.mul(at, ir.Constant(_VI64, [RECORD] * LANES)),
+                                ir.Constant(_VI64, [RECORD - 1] * LANES))
+            e2 = run.gather(box_ptr, e2_at, lanes, run.zero)
+            rows = run.gather(rows_ptr, at, lanes, ir.Constant(_VI64, [0] * LANES))
+            run.store(run.priority(d2, e2, lanes), p_at, lanes)
+            run.store(builder.trunc(rows, _VI32), obj_at, lanes)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+__all__ = ["LANES", "PACK_IN_REGISTER", "point_priority", "point_run", "target_features"]

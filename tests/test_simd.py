@@ -1,8 +1,10 @@
-"""simd.point_run (a point light's run of records in vector code) == the scalar rule it
-replaces (priority.box_d2, the mask, priority.falloff + p_user: the point light's branch
-of pairs._exact_pair), bit for bit, on generated records and runs; with both ways of
-packing the lanes (an AVX-512 register where the target has it, the portable
-compress store), and without a store past the pairs it appends."""
+"""simd.point_run then simd.point_priority (a point light's run of records in vector code)
+== the scalar rule they replace (priority.box_d2, the mask, priority.falloff + p_user: the
+point light's branch of pairs._exact_pair), bit for bit, on generated records and runs;
+point_run alone == the range test and the mask (the hits' positions and d2, which the
+light pass finishes for other lights); with both ways of packing the lanes (an AVX-512
+register where the target has it, the portable compress store), and without a store past
+the pairs it appends."""
 
 from __future__ import annotations
 
@@ -37,27 +39,50 @@ def scalar_run(box, bits, rows, v0, v1, light, out_obj, out_p, n):
     return n
 
 
+@nb.njit(nogil=True, error_model="numpy")
+def scalar_hits(box, bits, v0, v1, light, out_obj, out_p, n):
+    """(position, d2) of the records in range and mask, as point_run leaves them."""
+    x, y, z, r, mask, _, _ = light
+    for v in range(v0, v1):
+        d2 = box_d2(box, v, x, y, z)
+        if d2 <= r * r and np.int64(bits[v, 6]) & np.int64(mask) != 0:
+            out_obj[n] = v
+            out_p[n] = d2
+            n += 1
+    return n
+
+
 def _compiled(in_register: bool):
-    """A fresh kernel around point_run, lowered with the given packing (the flag is read
-    when the intrinsic is lowered)."""
+    """Fresh kernels around point_run (then point_priority: ``run``; alone: ``hits``),
+    lowered with the given packing (the flag is read when the intrinsic is lowered)."""
     before = simd.PACK_IN_REGISTER
     simd.PACK_IN_REGISTER = in_register
     try:
         @nb.njit(nogil=True, error_model="numpy")
         def run(box, rows, v0, v1, light, out_obj, out_p, n):
+            end = simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
+            if end >= 0:
+                simd.point_priority(box, rows, light, out_obj, out_p, n, end)
+            return end
+
+        @nb.njit(nogil=True, error_model="numpy")
+        def hits(box, rows, v0, v1, light, out_obj, out_p, n):
             return simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
 
         box = np.zeros((1, 8))
-        run(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
-            np.zeros(1), 0)
-        return run
+        for kernel in (run, hits):
+            kernel(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
+                   np.zeros(1), 0)
+        return run, hits
     finally:
         simd.PACK_IN_REGISTER = before
 
 
 # The register packing only where numba compiles for AVX-512 (it could not run elsewhere).
 PACKINGS = [False] + ([True] if simd.PACK_IN_REGISTER else [])
-KERNELS = {packing: _compiled(packing) for packing in PACKINGS}
+COMPILED = {packing: _compiled(packing) for packing in PACKINGS}
+KERNELS = {packing: kernels[0] for packing, kernels in COMPILED.items()}
+HITS = {packing: kernels[1] for packing, kernels in COMPILED.items()}
 
 
 @st.composite
@@ -101,6 +126,15 @@ def test_point_run_equals_the_scalar_rule(case, start):
         got = kernel(recs, rows, v0, v1, light, got_obj, got_p, start)
         assert got == want, packing
         # Same pairs in the same order, P bit for bit, and nothing written outside them.
+        assert np.array_equal(got_obj, want_obj), packing
+        assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
+    want_obj = np.full(size, SENTINEL_ROW, np.int32)
+    want_p = np.full(size, SENTINEL_P)
+    want = scalar_hits(recs, bits, v0, v1, light, want_obj, want_p, start)
+    for packing, kernel in HITS.items():
+        got_obj = np.full(size, SENTINEL_ROW, np.int32)
+        got_p = np.full(size, SENTINEL_P)
+        assert kernel(recs, rows, v0, v1, light, got_obj, got_p, start) == want, packing
         assert np.array_equal(got_obj, want_obj), packing
         assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
 
