@@ -64,7 +64,7 @@ from .select import (
     topk_insert,
 )
 from .shadows import caster_bits, pick_slot_shadows
-from .simd import point_priority, point_run
+from .simd import point_priority, point_run, prefetch_row
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -406,6 +406,8 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     for ch in nb.prange(n_chunks):
         keep = (np.empty(256, np.int32), np.empty(256))
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
+            if t + 1 < rows.shape[0]:
+                prefetch_row(lights[0], rows[t + 1])
             keep = _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count,
                               keep, model, w_obj, w_int)
     return count

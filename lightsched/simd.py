@@ -324,4 +324,31 @@ def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
     return sig, codegen
 
 
-__all__ = ["LANES", "PACK_IN_REGISTER", "point_priority", "point_run", "target_features"]
+@intrinsic(prefer_literal=False)
+def prefetch_row(typingctx, table, row):
+    """Asks the cache for the start of ``table[row]`` (a C-order 2-D array) without waiting
+    for it: the light pass takes its lights in cell order, so each light's row of
+    light_hot is a miss that stalled the walk (~9% of its samples) until fetched one light
+    ahead. Out-of-range rows are allowed: a prefetch never faults."""
+    if not (isinstance(table, types.Array) and table.ndim == 2 and table.layout == "C"
+            and isinstance(row, types.Integer)):
+        return None
+    sig = types.void(table, row)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        stride = builder.extract_value(ary.strides, 0)
+        at = builder.mul(context.cast(builder, args[1], signature.args[1], types.int64),
+                         stride)
+        ptr = builder.gep(builder.bitcast(ary.data, ir.PointerType(_I8)), [at])
+        fn = _declare(builder, "llvm.prefetch.p0", ir.VoidType(),
+                      [ir.PointerType(_I8), _I32, _I32, _I32])
+        builder.call(fn, [ptr, ir.Constant(_I32, 0), ir.Constant(_I32, 3),
+                          ir.Constant(_I32, 1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+__all__ = ["LANES", "PACK_IN_REGISTER", "point_priority", "point_run", "prefetch_row",
+           "target_features"]
