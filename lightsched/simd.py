@@ -128,13 +128,17 @@ class _Run:
                                  [ir.PointerType(_VI32), _I32, _VB, _VI32])
         self.popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
 
-    def records(self, box: ir.Value, v: ir.Value, left: ir.Value) -> list[ir.Value]:
-        """The fields of records v .. v+7 (those from ``left`` on read as zeros)."""
+    def records(self, box: ir.Value, v: ir.Value, left: ir.Value | None) -> list[ir.Value]:
+        """The fields of records v .. v+7 (those from ``left`` on read as zeros; all eight
+        read whole when ``left`` is None)."""
         b = self.b
         recs = []
         for k in range(LANES):
             at = b.mul(b.add(v, ir.Constant(_I64, k)), ir.Constant(_I64, RECORD))
             ptr = b.bitcast(b.gep(box, [at]), ir.PointerType(_VF))
+            if left is None:
+                recs.append(b.load(ptr, align=8))
+                continue
             live = _splat(b, b.icmp_signed("<", ir.Constant(_I64, k), left), _VB)
             recs.append(b.call(self.load_f, [ptr, ir.Constant(_I32, 8), live, self.zero]))
         return _transpose(b, recs)
@@ -271,9 +275,10 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
         run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
                    PACK_IN_REGISTER)
         n_slot = cgutils.alloca_once_value(builder, n0)
-        with cgutils.for_range_slice(builder, v0_, v1_, ir.Constant(_I64, LANES)) as (v, _):
-            left = builder.sub(v1_, v)
-            lanes = builder.icmp_signed("<", run.iota, _splat(builder, left, _VI64))
+
+        def step(v: ir.Value, left: ir.Value | None) -> None:
+            lanes = (ir.Constant(_VB, [1] * LANES) if left is None else
+                     builder.icmp_signed("<", run.iota, _splat(builder, left, _VI64)))
             hit, d2 = run.hits(run.records(box_ptr, v, left), lanes)
             count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
             n = builder.load(n_slot)
@@ -281,6 +286,16 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
             run.append(builder.trunc(at, _VI32), hit, builder.gep(obj_ptr, [n]), count)
             run.append(d2, hit, builder.gep(p_ptr, [n]), count)
             builder.store(builder.add(n, count), n_slot)
+
+        # Whole steps read their records without masks (a mask per record costs a compare
+        # and a mask move each); the last, short step masks them.
+        whole = builder.add(v0_, builder.mul(builder.sdiv(builder.sub(v1_, v0_),
+                                                          ir.Constant(_I64, LANES)),
+                                             ir.Constant(_I64, LANES)))
+        with cgutils.for_range_slice(builder, v0_, whole, ir.Constant(_I64, LANES)) as (v, _):
+            step(v, None)
+        with builder.if_then(builder.icmp_signed("<", whole, v1_)):
+            step(whole, builder.sub(v1_, whole))
         return builder.load(n_slot)
 
     return sig, codegen
