@@ -64,7 +64,7 @@ from .select import (
     topk_insert,
 )
 from .shadows import caster_bits, pick_slot_shadows
-from .simd import point_priority, point_run, prefetch_row
+from .simd import point_priority, point_run, prefetch_row, spot_priority
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -463,6 +463,10 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
         if typ == POINT and model == MODEL_CONTRIBUTION:
             point_priority(vis_box, vis_rows, _point_light(hot, j), pair_obj, pair_p,
                            offsets[t], n)
+        elif typ == SPOT and model == MODEL_CONTRIBUTION:
+            spot = (lf[j, 0], lf[j, 1], lf[j, 2], lf[j, 3], lf[j, 4], lf[j, 5])
+            n = spot_priority(vis_box, vis_rows, _point_light(hot, j), spot, pair_obj,
+                              pair_p, offsets[t], n)
         else:
             n = _finish_hits(hot, lf, j, typ, offsets[t], n, vis_box, vis_rows, pair_obj,
                              pair_p, model, w_obj, w_int)

@@ -1,33 +1,39 @@
-"""The point light's run of candidates in vector code (DESIGN section 2, "Affects" and the
+"""A light's run of candidates in vector code (DESIGN section 2, "Affects" and the
 contribution model of "Priority").
 
-Takes a run of object records (pairs.visible_objects: [V, 8] float64, lo, hi, mask bits,
-e2) at positions v0..v1-1, their object rows, and one point light; appends the pairs it
-affects, (object row, P), to the light's segment of the pair buffers and returns the new
-end. pairs.light_pass calls it for point lights under the contribution model with float64
-records; spot lights, the thesis model and "fast" float32 records keep the scalar loop.
+point_run takes a run of object records (pairs.visible_objects: [V, 8] float64, lo, hi,
+mask bits, e2) at positions v0..v1-1 and one light's sphere and mask; it appends the hits
+(range test and mask), as (position, d2), to the light's segment of the pair buffers and
+returns the new end. After the light's whole walk, point_priority (a point light) or
+spot_priority (a spot light: the cone, then the spot factor) turn the hits into (object
+row, P) in place, under the contribution model. pairs.light_pass uses point_run for every
+point and spot light with float64 records, and finishes the thesis model's hits with its
+scalar code; "fast" float32 records keep the scalar loop throughout.
 
-Why LLVM IR: the scalar loop spends most of its time on the range test and the
-compaction of the survivors, one candidate at a time; LLVM's loop vectoriser does not
-vectorise a compaction (a store at an index that grows by the test), and numba has no
-vector types, masked loads or compress. So the loop is written here as IR, eight
-candidates a step: eight masked loads of whole records transposed into fields, the range
-test, the mask and P on all eight lanes, and the lanes that pass packed to the front and
-stored. The arithmetic is the scalar rule's, the same IEEE operations in the same order
-and without contraction (no fast-math flags): priority.box_d2, then priority.falloff plus
-p_user; every lane's P is a float64 bit for bit equal to the scalar loop's
-(tests/test_simd.py). maxnum/minnum stand for numba's max/min, which keep the first
-argument unless the second is larger (smaller): they agree wherever the scalar rule drops a
-NaN too (w = max(0, 1 - q*q) and min(1, a/e2) with a NaN second argument, e.g. 0/0 when
-r*r underflows), the box distance meets no NaN from finite coordinates, and -0.0 against
-+0.0 is removed by squaring.
+Why LLVM IR: the scalar loop spends most of its time on the range test and the compaction
+of the survivors, one candidate at a time; LLVM's loop vectoriser does not vectorise a
+compaction (a store at an index that grows by the test), and numba has no vector types,
+masked loads or compress. So the loop is written here as IR, eight candidates a step: eight
+loads of whole records (masked in a run's last, short step) transposed into fields, the
+range test and the mask on all eight lanes, and the lanes that pass packed to the front and
+stored. P follows on the packed hits, eight a step (a quarter of the records in the city,
+so the rule's divisions run on pairs, not candidates): e2 and the object rows gathered by
+position, or, for a spot, the whole records loaded again for the bounding sphere. The
+arithmetic is the scalar rule's, the same IEEE operations in the same order and without
+contraction (no fast-math flags): priority.box_d2, priority.spot_cone, then
+priority.falloff (times s) plus p_user; every lane's P is a float64 bit for bit equal to
+the scalar loop's (tests/test_simd.py). maxnum/minnum stand for numba's max/min, which keep
+the first argument unless the second is larger (smaller): they agree wherever the scalar
+rule drops a NaN too (w = max(0, 1 - q*q) and min(1, a/e2) with a NaN second argument, e.g.
+0/0 when r*r underflows), the box distance meets no NaN from finite coordinates, and -0.0
+against +0.0 is removed by squaring.
 
 Packing the lanes: with AVX-512 (avx512f and avx512vl in the features numba compiles for)
 into a register, then a masked store of the first lanes; elsewhere with the portable
 ``llvm.masked.compressstore``, which LLVM lowers for any target. AVX-512's compress
-straight to memory is avoided, and so are gathers of the fields. With the range test
-alone in vector code (the pairs' rest cut out), the light pass at (100k, 10k) took 9.0 ms
-one-thread scalar, 20.2 with gathers and the memory form, 11.3 with gathers and a
+straight to memory is avoided, and so are gathers of the candidates' fields. With the range
+test alone in vector code (the pairs' rest cut out), the light pass at (100k, 10k) took 9.0
+ms one-thread scalar, 20.2 with gathers and the memory form, 11.3 with gathers and a
 register, 6.6 with masked loads of whole records, a transpose and a register.
 """
 
@@ -143,6 +149,16 @@ class _Run:
             recs.append(b.call(self.load_f, [ptr, ir.Constant(_I32, 8), live, self.zero]))
         return _transpose(b, recs)
 
+    def records_at(self, box: ir.Value, at: ir.Value) -> list[ir.Value]:
+        """The fields of the records at positions ``at`` (every lane a valid position)."""
+        b = self.b
+        recs = []
+        for k in range(LANES):
+            v = b.extract_element(at, ir.Constant(_I32, k))
+            ptr = b.gep(box, [b.mul(v, ir.Constant(_I64, RECORD))])
+            recs.append(b.load(b.bitcast(ptr, ir.PointerType(_VF)), align=8))
+        return _transpose(b, recs)
+
     def masked(self, load: ir.Function, ptr: ir.Value, lanes: ir.Value,
                fill: ir.Value) -> ir.Value:
         """The lanes of the vector at ``ptr`` (``fill`` elsewhere)."""
@@ -184,7 +200,7 @@ class _Run:
         return hit, d2
 
     def priority(self, d2: ir.Value, e2: ir.Value, lanes: ir.Value) -> ir.Value:
-        """P per lane of the pairs at distance d2 from objects of e2: falloff + p_user."""
+        """priority.falloff per lane of the pairs at distance d2 from objects of e2."""
         b = self.b
         q = b.fdiv(d2, self.rr)
         w = b.call(self.maxnum, [b.fsub(self.one, b.fmul(q, q)), self.zero])
@@ -199,7 +215,38 @@ class _Run:
             b.store(b.select(g_is_one, self.one, g_div), g_slot)
         g = b.load(g_slot)
         num = b.fmul(b.fmul(b.fmul(self.intensity, w), w), g)
-        return b.fadd(b.fdiv(num, b.fadd(d2, ir.Constant(_VF, [R0 * R0] * LANES))), self.p_user)
+        return b.fdiv(num, b.fadd(d2, ir.Constant(_VF, [R0 * R0] * LANES)))
+
+    def cone(self, f: list[ir.Value], spot: list[ir.Value]) -> tuple[ir.Value, ir.Value]:
+        """(meets, s) per lane of the spot and the records' fields f: priority.spot_cone
+        on the bounding sphere of pairs._geometry, the same operations in the same order;
+        spot = (axis x, y, z, cos o, sin o, cos inner or NaN) as vectors."""
+        b = self.b
+        two = ir.Constant(_VF, [2.0] * LANES)
+        big_r = b.fdiv(self.sqrt(f[7]), two)
+        v = [b.fsub(b.fdiv(b.fadd(f[k], f[3 + k]), two), self.p[k]) for k in range(3)]
+        n = self.sqrt(b.fadd(b.fadd(b.fmul(v[0], v[0]), b.fmul(v[1], v[1])),
+                             b.fmul(v[2], v[2])))
+        a = b.fadd(b.fadd(b.fmul(v[0], spot[0]), b.fmul(v[1], spot[1])),
+                   b.fmul(v[2], spot[2]))
+        nn = b.fmul(n, n)
+        sq = self.sqrt(b.call(self.maxnum, [b.fsub(nn, b.fmul(big_r, big_r)), self.zero]))
+        inside = b.fcmp_ordered("<=", n, big_r)
+        meets = b.or_(inside, b.fcmp_ordered(">=", a, b.fsub(b.fmul(spot[3], sq),
+                                                              b.fmul(big_r, spot[4]))))
+        whole = b.or_(b.or_(inside, b.fcmp_ordered(">=", a, sq)),
+                      b.fcmp_ordered("==", nn, self.zero))
+        side = self.sqrt(b.call(self.maxnum, [b.fsub(nn, b.fmul(a, a)), self.zero]))
+        c = b.select(whole, self.one,
+                     b.fdiv(b.fadd(b.fmul(a, sq), b.fmul(big_r, side)), nn))
+        t = b.fdiv(b.fsub(c, spot[3]), b.fsub(spot[5], spot[3]))
+        t = b.call(self.minnum, [b.call(self.maxnum, [t, self.zero]), self.one])
+        step = b.select(b.fcmp_ordered(">=", c, spot[3]), self.one, self.zero)
+        s = b.select(b.fcmp_unordered("uno", spot[5], spot[5]), step, b.fmul(t, t))
+        return meets, s
+
+    def sqrt(self, x: ir.Value) -> ir.Value:
+        return self.b.call(_declare(self.b, "llvm.sqrt.v8f64", _VF, [_VF]), [x])
 
     def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value) -> None:
         """Stores the lanes of ``values`` that hit, in lane order, from ``out`` on (count
@@ -332,9 +379,56 @@ def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
                                 ir.Constant(_VI64, [RECORD - 1] * LANES))
             e2 = run.gather(box_ptr, e2_at, lanes, run.zero)
             rows = run.gather(rows_ptr, at, lanes, ir.Constant(_VI64, [0] * LANES))
-            run.store(run.priority(d2, e2, lanes), p_at, lanes)
+            run.store(builder.fadd(run.priority(d2, e2, lanes), run.p_user), p_at, lanes)
             run.store(builder.trunc(rows, _VI32), obj_at, lanes)
         return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic(prefer_literal=False)
+def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1):
+    """point_priority for a spot light under the contribution model: of the (position, d2)
+    that point_run left at n0..n1-1, keeps those whose bounding sphere meets the cone
+    (priority.spot_cone), packed to the front from n0 as (object row, P = falloff * s +
+    p_user), eight a step; returns the new end. spot = (axis x, y, z, cos o, sin o, cos
+    inner or NaN: light_f columns 0-5). For float32 records it returns -1 at once (the
+    scalar loop handled them)."""
+    if not (_typed(box, box_rows, light, out_obj, out_p) and isinstance(spot, types.UniTuple)
+            and spot.count == 6 and spot.dtype == types.float64):
+        return None
+    sig = types.int64(box, box_rows, light, spot, out_obj, out_p, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[0].dtype != types.float64:
+            return ir.Constant(_I64, -1)
+        box_ptr, rows_ptr, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
+                                                      (0, 1, 4, 5))
+        light_, spot_, n0_, n1_ = args[2], args[3], args[6], args[7]
+        run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
+                   PACK_IN_REGISTER)
+        axis = [_splat(builder, builder.extract_value(spot_, k), _VF) for k in range(6)]
+        m_slot = cgutils.alloca_once_value(builder, n0_)
+        with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
+            lanes = builder.icmp_signed("<", run.iota,
+                                        _splat(builder, builder.sub(n1_, i), _VI64))
+            p_at = builder.bitcast(builder.gep(p_ptr, [i]), ir.PointerType(_VF))
+            obj_at = builder.bitcast(builder.gep(obj_ptr, [i]), ir.PointerType(_VI32))
+            d2 = run.masked(run.load_f, p_at, lanes, run.zero)
+            # Lanes past the end read position 0, a record that exists (there are hits).
+            at = builder.sext(run.masked(run.load_i32, obj_at, lanes,
+                                         ir.Constant(_VI32, [0] * LANES)), _VI64)
+            f = run.records_at(box_ptr, at)
+            meets, s = run.cone(f, axis)
+            hit = builder.and_(lanes, meets)
+            p = builder.fadd(builder.fmul(run.priority(d2, f[7], hit), s), run.p_user)
+            rows = run.gather(rows_ptr, at, hit, ir.Constant(_VI64, [0] * LANES))
+            count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
+            m = builder.load(m_slot)
+            run.append(builder.trunc(rows, _VI32), hit, builder.gep(obj_ptr, [m]), count)
+            run.append(p, hit, builder.gep(p_ptr, [m]), count)
+            builder.store(builder.add(m, count), m_slot)
+        return builder.load(m_slot)
 
     return sig, codegen
 
@@ -366,4 +460,4 @@ def prefetch_row(typingctx, table, row):
 
 
 __all__ = ["LANES", "PACK_IN_REGISTER", "point_priority", "point_run", "prefetch_row",
-           "target_features"]
+           "spot_priority", "target_features"]

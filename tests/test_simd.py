@@ -16,8 +16,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import visible_objects
-from lightsched.priority import box_d2, falloff
+from lightsched.pairs import _finish_hits, visible_objects
+from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
+from lightsched.scene import SPOT
 
 finite = {"allow_nan": False, "allow_infinity": False}
 SENTINEL_ROW = -7
@@ -69,11 +70,17 @@ def _compiled(in_register: bool):
         def hits(box, rows, v0, v1, light, out_obj, out_p, n):
             return simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
 
+        @nb.njit(nogil=True, error_model="numpy")
+        def spot(box, rows, light, axis, out_obj, out_p, n0, n1):
+            return simd.spot_priority(box, rows, light, axis, out_obj, out_p, n0, n1)
+
         box = np.zeros((1, 8))
         for kernel in (run, hits):
             kernel(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
                    np.zeros(1), 0)
-        return run, hits
+        spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
+             np.zeros(1), 0, 0)
+        return run, hits, spot
     finally:
         simd.PACK_IN_REGISTER = before
 
@@ -83,6 +90,7 @@ PACKINGS = [False] + ([True] if simd.PACK_IN_REGISTER else [])
 COMPILED = {packing: _compiled(packing) for packing in PACKINGS}
 KERNELS = {packing: kernels[0] for packing, kernels in COMPILED.items()}
 HITS = {packing: kernels[1] for packing, kernels in COMPILED.items()}
+SPOTS = {packing: kernels[2] for packing, kernels in COMPILED.items()}
 
 
 @st.composite
@@ -137,6 +145,94 @@ def test_point_run_equals_the_scalar_rule(case, start):
         assert kernel(recs, rows, v0, v1, light, got_obj, got_p, start) == want, packing
         assert np.array_equal(got_obj, want_obj), packing
         assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
+
+
+@nb.njit(nogil=True, error_model="numpy")
+def scalar_spot(box, rows, hot, lf, out_obj, out_p, n0, n1):
+    """The scalar rule on point_run's hits of spot row 0: pairs._finish_hits (the cone,
+    then P) under the contribution model."""
+    return _finish_hits(hot, lf, 0, SPOT, n0, n1, box, rows, out_obj, out_p,
+                        MODEL_CONTRIBUTION, 0.0, 0.0)
+
+
+@st.composite
+def spot_cones(draw):
+    """(axis, cos o, sin o, cos inner or NaN) as pack_lights leaves light_f columns 0-5."""
+    axis = np.array([draw(st.one_of(st.integers(-1, 1).map(float),
+                                    st.floats(-1.0, 1.0, **finite))) for _ in range(3)])
+    if not np.linalg.norm(axis) > 1e-3:
+        axis = np.array([0.0, -1.0, 0.0])
+    axis = axis / np.linalg.norm(axis)
+    outer = draw(st.one_of(st.floats(0.01, 1.5, **finite), st.sampled_from([0.3, 0.785, 1.2])))
+    inner = draw(st.one_of(st.just(outer), st.just(0.0), st.floats(0.0, outer, **finite)))
+    cos_i = np.cos(inner)
+    step = inner == outer or cos_i == np.cos(outer)
+    return (*axis, np.cos(outer), np.sin(outer), np.nan if step else cos_i)
+
+
+@examples(3.0)
+@given(case=records_and_run(), cone=spot_cones(), start=st.integers(0, 5))
+def test_spot_priority_equals_the_scalar_rule(case, cone, start):
+    """spot_priority on point_run's hits == _finish_hits' spot branch: the same pairs kept
+    (bounding sphere meets the cone), in the same order, P bit for bit."""
+    lo, hi, masks, rows, v0, v1, light = case
+    n = lo.shape[0]
+    recs = np.zeros((n, 8))
+    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+                    np.zeros(3))
+    hot = np.array([[*light[:5], SPOT * 8, *light[5:]]])
+    lf = np.zeros((1, 8))
+    lf[0, :6] = cone
+    size = start + (v1 - v0) + 16
+    for packing in PACKINGS:
+        hits = (np.full(size, SENTINEL_ROW, np.int32), np.full(size, SENTINEL_P))
+        end = HITS[packing](recs, rows, v0, v1, light, *hits, start)
+        want = tuple(a.copy() for a in hits)
+        want_end = scalar_spot(recs, rows, hot, lf, *want, start, end)
+        got = tuple(a.copy() for a in hits)
+        got_end = SPOTS[packing](recs, rows, light, cone, *got, start, end)
+        assert got_end == want_end, packing
+        assert np.array_equal(got[0][:got_end], want[0][:want_end]), packing
+        assert np.array_equal(got[1][:got_end].view(np.int64),
+                              want[1][:want_end].view(np.int64)), packing
+        # Nothing written past the hits.
+        assert np.array_equal(got[0][end:], hits[0][end:]), packing
+
+
+@pytest.mark.parametrize("packing", PACKINGS)
+def test_spot_priority_on_a_cloud_around_the_cone(packing):
+    """Small and large boxes all around a spot (inside, in the penumbra, outside, behind,
+    on the apex), smooth and step profiles: the scalar rule's pairs and P."""
+    rng = np.random.default_rng(11)
+    n = 3000
+    centre = rng.normal(size=(n, 3)) * 12.0
+    half = rng.choice([0.0, 0.3, 2.0, 9.0], size=(n, 1)) * rng.uniform(0, 1, (n, 3))
+    lo, hi = centre - half, centre + half
+    recs = np.zeros((n, 8))
+    visible_objects(lo, hi, np.full(n, 0xFFFFFFFF, np.uint32), np.arange(n), n,
+                    (recs, recs.view(np.int64)), np.zeros(3))
+    rows = rng.permutation(n).astype(np.int64)
+    light = (0.5, 0.25, -0.5, 25.0, float(0xFFFFFFFF), 40.0, 0.5)
+    hot = np.array([[*light[:5], SPOT * 8, *light[5:]]])
+    kept = set()
+    for axis, outer, inner in [((0.0, -1.0, 0.0), 0.6, 0.3), ((0.6, 0.0, 0.8), 1.2, 1.2),
+                               ((0.0, 0.0, 1.0), 0.05, 0.0), ((0.36, 0.48, 0.8), 1.5, 1.0)]:
+        cos_i = np.cos(inner)
+        cone = (*axis, np.cos(outer), np.sin(outer), np.nan if inner == outer else cos_i)
+        lf = np.zeros((1, 8))
+        lf[0, :6] = cone
+        hits = (np.zeros(n, np.int32), np.zeros(n))
+        end = HITS[packing](recs, rows, 0, n, light, *hits, 0)
+        want, got = tuple(a.copy() for a in hits), tuple(a.copy() for a in hits)
+        want_end = scalar_spot(recs, rows, hot, lf, *want, 0, end)
+        assert SPOTS[packing](recs, rows, light, cone, *got, 0, end) == want_end
+        assert np.array_equal(got[0][:want_end], want[0][:want_end])
+        assert np.array_equal(got[1][:want_end].view(np.int64),
+                              want[1][:want_end].view(np.int64))
+        p_spot = (want[1][:want_end] - light[6]) / light[5]
+        kept.add((want_end > 0, bool((p_spot > 0).any())))
+    # Each cone kept pairs, some of them lit (s > 0).
+    assert kept == {(True, True)}
 
 
 @pytest.mark.parametrize("packing", PACKINGS)
