@@ -4,13 +4,15 @@
     python bench/paired.py --base fdf791a --sizes 1M:100k --scenarios all --frames 10
 
 The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
-and imported under another name, ``lightsched_base``, beside the working tree's
-``lightsched``. Both get a Scheduler on the same scene and the same motion (bench/core.py's
-scenarios), and their frames alternate (A B, then B A, ...), so the minutes when this noisy
-2-core box is slow hit both alike. Reported per (size, scenario): each side's median frame
-time and the median of the per-frame differences (working tree - base) with its quartiles,
-and the stages (``stats["seconds"]``) whose medians moved most. The mean of the differences
-is given too: a change to work done every few frames (packing the pair cache) leaves the
+and the working tree's copied, and both are imported under other names
+(``lightsched_base``, ``lightsched_new``) without their numba caches, so both sides compile
+their kernels in this process: a side that loads numba's cache runs slower (below). Both
+get a Scheduler on the same scene and the same motion (bench/core.py's scenarios), and
+their frames alternate (A B, then B A, ...), so the minutes when this noisy 2-core box is
+slow hit both alike. Reported per (size, scenario): each side's median frame time and the
+median of the per-frame differences (working tree - base) with its quartiles, and the
+stages (``stats["seconds"]``) whose medians moved most. The mean of the differences is
+given too: a change to work done every few frames (packing the pair cache) leaves the
 median difference near 0 and shows in the mean. The two schedulers hold two copies of the
 state, so each frame finds a colder cache than it would alone: the absolute times are above
 bench/core.py's, the difference is what this measures.
@@ -20,7 +22,9 @@ resolve here: their run medians spread by +-10% from one minute to the next.
 Its own resolution, from A/A runs (``--base HEAD`` on a clean tree: the same code on both
 sides): at (100k, 10k) one run's median difference moves by up to ~0.5 ms with no change,
 its quartiles sometimes excluding zero (bench/RESULTS.md); repeat a run before trusting a
-difference of that size.
+difference of that size. Until the sides both compiled, the working tree's loaded numba's
+cache and the base compiled: that alone put ~+0.5 ms on the working tree's object pass at
+(100k, 10k) (A/A +0.70 ms, objects 5.23 -> 5.71; with both compiling +0.05).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
+import shutil
 import sys
 import tempfile
 import time
@@ -42,17 +47,28 @@ from history import extract, resolve
 import lightsched
 
 
-def load_base(path: Path) -> Any:
-    """The package at path/lightsched imported as ``lightsched_base`` (its relative imports
-    resolve inside it, so the two versions do not mix)."""
+def load_package(path: Path, name: str) -> Any:
+    """The package at path/lightsched imported as ``name`` (its relative imports resolve
+    inside it, so the two versions do not mix), its numba cache removed first: both sides
+    compile their kernels in this process (see the module's docstring)."""
+    shutil.rmtree(path / "lightsched" / "__pycache__", ignore_errors=True)
     spec = importlib.util.spec_from_file_location(
-        "lightsched_base", path / "lightsched" / "__init__.py",
+        name, path / "lightsched" / "__init__.py",
         submodule_search_locations=[str(path / "lightsched")])
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    sys.modules["lightsched_base"] = module
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def copy_worktree(workdir: Path) -> Path:
+    """The working tree's lightsched/ copied under workdir (as extract() does a commit's)."""
+    dest = workdir / "worktree"
+    shutil.rmtree(dest, ignore_errors=True)
+    shutil.copytree(Path(lightsched.__file__).parent, dest / "lightsched",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    return dest
 
 
 def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
@@ -109,13 +125,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     add_object_ids(p)
     p.add_argument("--workdir", default=None,
-                   help="where to extract the base (kept, with its numba cache; default a "
-                        "temporary folder)")
+                   help="where to extract the base and copy the working tree (kept, "
+                        "without numba caches; default a temporary folder)")
     args = p.parse_args(argv)
     base = resolve(args.base)
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(args.workdir) if args.workdir else Path(tmp)
-        packages = {"new": lightsched, "base": load_base(extract(base, workdir))}
+        packages = {"new": load_package(copy_worktree(workdir), "lightsched_new"),
+                    "base": load_package(extract(base, workdir), "lightsched_base")}
         m = machine()
         say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); working tree "
             f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
