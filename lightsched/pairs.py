@@ -484,7 +484,7 @@ def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, kee
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _point_light(hot, j):
-    """Light j as simd.point_run and point_priority take it."""
+    """Light j as simd.point_run, point_priority and spot_priority take it."""
     return hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], hot[j, 4], hot[j, 6], hot[j, 7]
 
 

@@ -278,7 +278,7 @@ def _element(vty: ir.VectorType) -> tuple[str, int]:
 
 
 def _typed(box, box_rows, light, out_obj, out_p) -> bool:
-    """Whether the arguments are those point_run and point_priority take."""
+    """Whether the arguments are those point_run, point_priority and spot_priority take."""
     arrays = (box, box_rows, out_obj, out_p)
     return (all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
             and box.dtype in (types.float64, types.float32) and box.ndim == 2
@@ -299,10 +299,11 @@ def _pointers(context, builder, signature, args, at: tuple[int, ...]) -> list[ir
 
 @intrinsic(prefer_literal=False)
 def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
-    """Appends the hits of one point light among the records at positions v0..v1-1 of
+    """Appends the hits of one light's sphere among the records at positions v0..v1-1 of
     ``box`` ([V, 8] float64, C order) to out_obj (int32) / out_p (float64) from n, as
     (position, d2): the range test and the mask, not yet P; returns the new n.
-    point_priority then turns each into (object row, P). light = (x, y, z, r, mask, i,
+    point_priority or spot_priority then turn them into (object row, P); for other models
+    the light pass does. light = (x, y, z, r, mask, i,
     p_user) as float64 (light_hot columns 0-4, 6, 7); box_rows (int64 [V], the records'
     object rows) is point_priority's; every array contiguous. The caller guarantees the
     room: at most one pair per record. Float32 records ("fast" precision) are typed too,
