@@ -165,6 +165,19 @@ class _Run:
         size = _element(fill.type)[1]
         return self.b.call(load, [ptr, ir.Constant(_I32, size), lanes, fill])
 
+    def hits_at(self, p_ptr: ir.Value, obj_ptr: ir.Value, i: ir.Value, end: ir.Value
+                ) -> tuple[ir.Value, ...]:
+        """The eight hits point_run left from i (before ``end``): (lanes, their pointers
+        into out_p and out_obj, d2, positions as int64; 0 in lanes past the end)."""
+        b = self.b
+        lanes = b.icmp_signed("<", self.iota, _splat(b, b.sub(end, i), _VI64))
+        p_at = b.bitcast(b.gep(p_ptr, [i]), ir.PointerType(_VF))
+        obj_at = b.bitcast(b.gep(obj_ptr, [i]), ir.PointerType(_VI32))
+        d2 = self.masked(self.load_f, p_at, lanes, self.zero)
+        at = b.sext(self.masked(self.load_i32, obj_at, lanes, ir.Constant(_VI32, [0] * LANES)),
+                    _VI64)
+        return lanes, p_at, obj_at, d2, at
+
     def gather(self, base: ir.Value, at: ir.Value, lanes: ir.Value, fill: ir.Value
                ) -> ir.Value:
         """base[at[k]] in lane k (``fill`` where a lane is off)."""
@@ -369,13 +382,7 @@ def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
         run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
                    PACK_IN_REGISTER)
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
-            lanes = builder.icmp_signed("<", run.iota,
-                                        _splat(builder, builder.sub(n1_, i), _VI64))
-            p_at = builder.bitcast(builder.gep(p_ptr, [i]), ir.PointerType(_VF))
-            obj_at = builder.bitcast(builder.gep(obj_ptr, [i]), ir.PointerType(_VI32))
-            d2 = run.masked(run.load_f, p_at, lanes, run.zero)
-            at = builder.sext(run.masked(run.load_i32, obj_at, lanes,
-                                         ir.Constant(_VI32, [0] * LANES)), _VI64)
+            lanes, p_at, obj_at, d2, at = run.hits_at(p_ptr, obj_ptr, i, n1_)
             e2_at = builder.add(builder.mul(at, ir.Constant(_VI64, [RECORD] * LANES)),
                                 ir.Constant(_VI64, [RECORD - 1] * LANES))
             e2 = run.gather(box_ptr, e2_at, lanes, run.zero)
@@ -411,14 +418,8 @@ def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1)
         axis = [_splat(builder, builder.extract_value(spot_, k), _VF) for k in range(6)]
         m_slot = cgutils.alloca_once_value(builder, n0_)
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
-            lanes = builder.icmp_signed("<", run.iota,
-                                        _splat(builder, builder.sub(n1_, i), _VI64))
-            p_at = builder.bitcast(builder.gep(p_ptr, [i]), ir.PointerType(_VF))
-            obj_at = builder.bitcast(builder.gep(obj_ptr, [i]), ir.PointerType(_VI32))
-            d2 = run.masked(run.load_f, p_at, lanes, run.zero)
             # Lanes past the end read position 0, a record that exists (there are hits).
-            at = builder.sext(run.masked(run.load_i32, obj_at, lanes,
-                                         ir.Constant(_VI32, [0] * LANES)), _VI64)
+            lanes, _, _, d2, at = run.hits_at(p_ptr, obj_ptr, i, n1_)
             f = run.records_at(box_ptr, at)
             meets, s = run.cone(f, axis)
             hit = builder.and_(lanes, meets)
