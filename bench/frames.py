@@ -28,7 +28,7 @@ import numpy as np
 from common import fmt_count, git_commit, parse_sizes, say
 from core import DT, Motion, add_object_ids, make_scene, parse_scenarios
 from history import extract, resolve
-from paired import load_base
+from paired import load_package
 
 import lightsched
 
@@ -88,7 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         if args.base:
             base = resolve(args.base)
-            pkg = load_base(extract(base, Path(args.workdir) if args.workdir else Path(tmp)))
+            # Its numba cache kept, as the working tree's is: each run alone in a process
+            # loads its kernels the same way.
+            pkg = load_package(extract(base, Path(args.workdir) if args.workdir else Path(tmp)),
+                               "lightsched_base", fresh=False)
             what = f"{base['sha'][:7]}'s core"
         else:
             pkg, what = lightsched, f"working tree {git_commit()}"

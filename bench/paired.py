@@ -47,11 +47,12 @@ from history import extract, resolve
 import lightsched
 
 
-def load_package(path: Path, name: str) -> Any:
+def load_package(path: Path, name: str, fresh: bool = True) -> Any:
     """The package at path/lightsched imported as ``name`` (its relative imports resolve
-    inside it, so the two versions do not mix), its numba cache removed first: both sides
-    compile their kernels in this process (see the module's docstring)."""
-    shutil.rmtree(path / "lightsched" / "__pycache__", ignore_errors=True)
+    inside it, so the two versions do not mix). ``fresh``: its numba cache removed first,
+    so that it compiles its kernels in this process (see the module's docstring)."""
+    if fresh:
+        shutil.rmtree(path / "lightsched" / "__pycache__", ignore_errors=True)
     spec = importlib.util.spec_from_file_location(
         name, path / "lightsched" / "__init__.py",
         submodule_search_locations=[str(path / "lightsched")])
