@@ -301,13 +301,18 @@ def _typed(box, box_rows, light, out_obj, out_p) -> bool:
             and light.dtype == types.float64)
 
 
-def _pointers(context, builder, signature, args, at: tuple[int, ...]) -> list[ir.Value]:
-    """Data pointers of the arrays box, box_rows, out_obj, out_p (argument positions
-    ``at``) as double*, i64*, i32*, double*."""
+def _lowering(context, builder, signature, args, at: tuple[int, ...], light_at: int
+              ) -> tuple[_Run, list[ir.Value]]:
+    """The _Run of the light tuple at argument ``light_at``, and the data pointers of the
+    arrays box, box_rows, out_obj, out_p (argument positions ``at``) as double*, i64*, i32*,
+    double*."""
     kinds = (_F64, _I64, _I32, _F64)
-    return [builder.bitcast(context.make_array(signature.args[k])(context, builder,
+    ptrs = [builder.bitcast(context.make_array(signature.args[k])(context, builder,
                                                                   args[k]).data,
                             ir.PointerType(t)) for k, t in zip(at, kinds, strict=True)]
+    light = args[light_at]
+    run = _Run(builder, [builder.extract_value(light, k) for k in range(7)], PACK_IN_REGISTER)
+    return run, ptrs
 
 
 @intrinsic(prefer_literal=False)
@@ -330,11 +335,9 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return ir.Constant(_I64, -1)
-        box_ptr, _, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
-                                               (0, 1, 5, 6))
-        v0_, v1_, light_, n0 = args[2], args[3], args[4], args[7]
-        run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
-                   PACK_IN_REGISTER)
+        run, (box_ptr, _, obj_ptr, p_ptr) = _lowering(context, builder, signature, args,
+                                                      (0, 1, 5, 6), 4)
+        v0_, v1_, n0 = args[2], args[3], args[7]
         n_slot = cgutils.alloca_once_value(builder, n0)
 
         def step(v: ir.Value, left: ir.Value | None) -> None:
@@ -376,11 +379,9 @@ def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return context.get_dummy_value()
-        box_ptr, rows_ptr, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
-                                                      (0, 1, 3, 4))
-        light_, n0_, n1_ = args[2], args[5], args[6]
-        run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
-                   PACK_IN_REGISTER)
+        run, (box_ptr, rows_ptr, obj_ptr, p_ptr) = _lowering(context, builder, signature,
+                                                             args, (0, 1, 3, 4), 2)
+        n0_, n1_ = args[5], args[6]
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
             lanes, p_at, obj_at, d2, at = run.hits_at(p_ptr, obj_ptr, i, n1_)
             e2_at = builder.add(builder.mul(at, ir.Constant(_VI64, [RECORD] * LANES)),
@@ -410,11 +411,9 @@ def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1)
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return ir.Constant(_I64, -1)
-        box_ptr, rows_ptr, obj_ptr, p_ptr = _pointers(context, builder, signature, args,
-                                                      (0, 1, 4, 5))
-        light_, spot_, n0_, n1_ = args[2], args[3], args[6], args[7]
-        run = _Run(builder, [builder.extract_value(light_, k) for k in range(7)],
-                   PACK_IN_REGISTER)
+        run, (box_ptr, rows_ptr, obj_ptr, p_ptr) = _lowering(context, builder, signature,
+                                                             args, (0, 1, 4, 5), 2)
+        spot_, n0_, n1_ = args[3], args[6], args[7]
         axis = [_splat(builder, builder.extract_value(spot_, k), _VF) for k in range(6)]
         m_slot = cgutils.alloca_once_value(builder, n0_)
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
