@@ -6,7 +6,7 @@
 The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
 and the working tree's copied, and both are imported under other names
 (``lightsched_base``, ``lightsched_new``) without their numba caches, so both sides compile
-their kernels in this process: a side that loads numba's cache runs slower (below). Both
+their kernels in this process (a side that loads numba's cache runs other code: below). Both
 get a Scheduler on the same scene and the same motion (bench/core.py's scenarios), and
 their frames alternate (A B, then B A, ...), so the minutes when this noisy 2-core box is
 slow hit both alike. Reported per (size, scenario): each side's median frame time and the
@@ -25,6 +25,15 @@ its quartiles sometimes excluding zero (bench/RESULTS.md); repeat a run before t
 difference of that size. Until the sides both compiled, the working tree's loaded numba's
 cache and the base compiled: that alone put ~+0.5 ms on the working tree's object pass at
 (100k, 10k) (A/A +0.70 ms, objects 5.23 -> 5.71; with both compiling +0.05).
+
+Why loaded code differs: numba compiles a parallel loop's body (the "gufunc") in a library
+of its own, then links a copy into the kernel's module, where LLVM optimises it again; the
+cache stores that module's machine code. A process that compiles runs the first copy (the
+JIT linker resolves the copy's weak symbol to the definition loaded first), a process that
+loads the cache runs the copy optimised again: other code (for the object pass 2,787 lines
+of assembly against 2,290), ~0.2-0.5 ms slower in a (100k, 10k) frame. ``--cached both``
+measures the code the service and bench/core.py run (a child process compiles both sides
+first and writes their caches); ``--base HEAD --cached base`` measures the difference.
 """
 
 from __future__ import annotations
@@ -33,6 +42,7 @@ import argparse
 import dataclasses
 import importlib.util
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -43,6 +53,7 @@ import numpy as np
 from common import fmt_count, git_commit, machine, parse_sizes, say
 from core import DT, Motion, add_object_ids, make_scene, parse_scenarios
 from history import extract, resolve
+from numba.core.dispatcher import Dispatcher
 
 import lightsched
 
@@ -128,16 +139,41 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workdir", default=None,
                    help="where to extract the base and copy the working tree (kept, "
                         "without numba caches; default a temporary folder)")
+    p.add_argument("--cached", choices=["none", "base", "new", "both"], default="none",
+                   help="the sides that run the code numba loads from its cache, as the "
+                        "service does (a child process compiles them first, writing their "
+                        "caches); the others compile in this process (default none; the "
+                        "module docstring says why the two differ)")
+    p.add_argument("--prime", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     base = resolve(args.base)
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(args.workdir) if args.workdir else Path(tmp)
-        packages = {"new": load_package(copy_worktree(workdir), "lightsched_new"),
-                    "base": load_package(extract(base, workdir), "lightsched_base")}
+        cached = {"new": args.cached in ("new", "both"), "base": args.cached in ("base", "both")}
+        if any(cached.values()) and not args.prime:
+            # The child copies and compiles both sides; the sides to load from the cache
+            # are then imported from its copies, which kept their caches.
+            rest = list(sys.argv[1:] if argv is None else argv)
+            subprocess.run([sys.executable, __file__, *rest, "--prime", "--workdir",
+                            str(workdir)], check=True)
+            paths = {"new": workdir / "worktree", "base": extract(base, workdir)}
+        else:
+            paths = {"new": copy_worktree(workdir), "base": extract(base, workdir)}
+        packages = {side: load_package(paths[side], "lightsched_" + side,
+                                       fresh=args.prime or not cached[side])
+                    for side in ("new", "base")}
+        if args.prime:
+            # Every kernel and signature the timed run will call, compiled and cached (some
+            # arrays turn read-only, a signature of their own, after the first frames).
+            for n, l in parse_sizes(args.sizes):
+                for scenario in parse_scenarios(args.scenarios):
+                    paired(packages, n, l, scenario, 3, args.warmup, args.seed,
+                           args.object_ids)
+            return 0
         m = machine()
         say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); working tree "
             f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
-            f"ids {args.object_ids}")
+            f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}")
         say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
             "| mean difference ms | stages that moved most (base -> working tree, ms) |")
         say("|---|---|---|---|---|---|---|---|")
@@ -149,7 +185,23 @@ def main(argv: list[str] | None = None) -> int:
                 say(f"| {fmt_count(n)} | {fmt_count(l)} | {scenario} | {r['base_ms']:.2f} "
                     f"| {r['new_ms']:.2f} | {r['diff_ms']:+.2f} ({q[0]:+.2f}..{q[1]:+.2f}) "
                     f"| {r['diff_mean_ms']:+.2f} | {stage_moves(r)} |")
+        say("numba kernels (signatures) loaded from the cache / compiled here: " + ", ".join(
+            f"{side} {loaded} / {compiled}" for side, (loaded, compiled) in
+            ((side, cache_stats(pkg)) for side, pkg in packages.items())))
     return 0
+
+
+def cache_stats(package: Any) -> tuple[int, int]:
+    """(signatures loaded from numba's cache, signatures compiled) over the package's
+    kernels, so a run shows which code it measured."""
+    loaded = compiled = 0
+    for name, module in list(sys.modules.items()):
+        if name.startswith(package.__name__ + "."):
+            for obj in vars(module).values():
+                if isinstance(obj, Dispatcher) and obj.__module__ == name:
+                    loaded += sum(obj.stats.cache_hits.values())
+                    compiled += sum(obj.stats.cache_misses.values())
+    return loaded, compiled
 
 
 if __name__ == "__main__":
