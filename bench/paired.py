@@ -30,8 +30,8 @@ Why loaded code differs: numba compiles a parallel loop's body (the "gufunc") in
 of its own, then links a copy into the kernel's module, where LLVM optimises it again; the
 cache stores that module's machine code. A process that compiles runs the first copy (the
 JIT linker resolves the copy's weak symbol to the definition loaded first), a process that
-loads the cache runs the copy optimised again: other code (for the object pass 2,787 lines
-of assembly against 2,290), ~0.2-0.5 ms slower in a (100k, 10k) frame. ``--cached both``
+loads the cache runs the copy optimised again: other code (for the object pass 2,524
+instructions against 2,074), ~0.5 ms slower in a (100k, 10k) frame. ``--cached both``
 measures the code the service and bench/core.py run (a child process compiles both sides
 first and writes their caches); ``--base HEAD --cached base`` measures the difference.
 """
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     add_object_ids(p)
     p.add_argument("--workdir", default=None,
                    help="where to extract the base and copy the working tree (kept, "
-                        "without numba caches; default a temporary folder)")
+                        "with numba caches only under --cached; default a temporary folder)")
     p.add_argument("--cached", choices=["none", "base", "new", "both"], default="none",
                    help="the sides that run the code numba loads from its cache, as the "
                         "service does (a child process compiles them first, writing their "
