@@ -871,7 +871,7 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     """A read-only view of ``a``. numba types an array's writability: the object pass's
     slot state and visibility are last frame's frozen outputs after the first frames and
     fresh arrays before, so passing them read-only always gives the kernel one signature,
-    compiled once (~13 s on a cold cache) instead of again on the second frame."""
+    compiled once (~15 s on a cold cache) instead of again on the second frame."""
     view = a.view()
     view.flags.writeable = False
     return view
