@@ -321,12 +321,12 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
     ``box`` ([V, 8] float64, C order) to out_obj (int32) / out_p (float64) from n, as
     (position, d2): the range test and the mask, not yet P; returns the new n.
     point_priority or spot_priority then turn them into (object row, P); for other models
-    the light pass does. light = (x, y, z, r, mask, i,
-    p_user) as float64 (light_hot columns 0-4, 6, 7); box_rows (int64 [V], the records'
-    object rows) is point_priority's; every array contiguous. The caller guarantees the
-    room: at most one pair per record. Float32 records ("fast" precision) are typed too,
-    so that a kernel holding both branches compiles, and return -1 at once: not handled,
-    the caller runs its scalar loop."""
+    the light pass does. light = (x, y, z, r, mask, i, p_user) as float64 (light_hot
+    columns 0-4, 6, 7); box_rows (int64 [V], the records' object rows) is
+    point_priority's; every array contiguous. The caller guarantees the room: at most one
+    pair per record. Float32 records ("fast" precision) are typed too, so that a kernel
+    holding both branches compiles, and return -1 at once: not handled, the caller runs its
+    scalar loop."""
     if not _typed(box, box_rows, light, out_obj, out_p):
         return None
     sig = types.int64(box, box_rows, types.int64, types.int64, light, out_obj, out_p,
