@@ -787,7 +787,7 @@ class Scheduler(SceneAPI):
         reach = lights.position[rows]
         r_box = np.concatenate([(reach - radius[:, None]).min(0),
                                 (reach + radius[:, None]).max(0)])
-        hidden = hidden_near(lo, hi, objs.casts_shadows, vis_o, r_box)
+        hidden = hidden_near(lo, hi, objs.casts_shadows, _read_only(vis_o), r_box)
         nh = hidden.size
         if nh == 0:
             return [], 0
@@ -871,7 +871,8 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     """A read-only view of ``a``. numba types an array's writability: the object pass's
     slot state and visibility are last frame's frozen outputs after the first frames and
     fresh arrays before, so passing them read-only always gives the kernel one signature,
-    compiled once (~15 s on a cold cache) instead of again on the second frame."""
+    compiled once (~15 s on a cold cache) instead of again on the second frame. The same
+    for the visibility that ``hidden_near`` reads."""
     view = a.view()
     view.flags.writeable = False
     return view
