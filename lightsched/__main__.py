@@ -1,10 +1,12 @@
-"""Command line: ``python -m lightsched demo | serve`` (also the ``lightsched`` console
-script).
+"""Command line: ``python -m lightsched demo | serve | warm-up`` (also the ``lightsched``
+console script).
 
 The only module of the package that prints. ``serve`` runs the HTTP service
 (lightsched_server, imported only then: the core has no web imports). ``demo`` builds the demo city
 (``lightsched.scenes.demo_scene``), steps it with moving lights and prints what each frame
-returned, summarised, and where the time went (``frame.stats["seconds"]``).
+returned, summarised, and where the time went (``frame.stats["seconds"]``). ``warm-up``
+compiles every kernel into numba's cache (``lightsched.warmup``), as a build step of a
+deployment would, so that no first frame pays for it.
 """
 
 from __future__ import annotations
@@ -151,8 +153,31 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--no-demo", action="store_true",
                     help="do not preload the demo session (id 'demo')")
     sv.add_argument("--log-level", default="info", help="uvicorn log level (default info)")
+    sv.add_argument("--no-warm-up", action="store_true",
+                    help="accept requests at once, without first loading (or, on a machine's "
+                         "first start, compiling) every kernel; the first frames then pay it")
     sv.set_defaults(func=run_serve)
+    w = sub.add_parser(
+        "warm-up", help="compile every kernel into numba's cache (a deployment's build step)",
+        description="Steps a small city through every frame path for each K and precision, "
+                    "so that numba compiles every kernel signature into its cache (a few "
+                    "minutes on a machine's first run; well under a second once cached). "
+                    "`serve` does the same before it accepts requests.")
+    w.add_argument("--max-lights", type=int, nargs="+", default=None,
+                   help="the K values to prepare (default: every compiled variant)")
+    w.add_argument("--precision", nargs="+", choices=("exact", "fast"),
+                   default=["exact", "fast"], help="precisions to prepare (default both)")
+    w.set_defaults(func=run_warm_up)
     return p
+
+
+def run_warm_up(args: argparse.Namespace) -> int:
+    from .warmup import warm_up
+
+    print("LightSched: preparing kernels (compiling them takes a few minutes on a machine's "
+          "first run)", flush=True)
+    print(warm_up(args.max_lights, tuple(args.precision)).summary(), flush=True)
+    return 0
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -162,7 +187,8 @@ def run_serve(args: argparse.Namespace) -> int:
         print(f"lightsched serve needs the server extra (pip install 'lightsched[server]' and "
               f"clients/python): {e}", file=sys.stderr)
         return 2
-    serve(args.host, args.port, demo=not args.no_demo, log_level=args.log_level)
+    serve(args.host, args.port, demo=not args.no_demo, log_level=args.log_level,
+          warm_up=not args.no_warm_up)
     return 0
 
 

@@ -359,8 +359,11 @@ def _answers(name: str, status: int = 200) -> dict[int | str, Any]:
 
 
 def serve(host: str = "127.0.0.1", port: int = 8080, demo: bool = True,
-          settings: Settings | None = None, log_level: str = "info") -> None:
-    """Runs the service with uvicorn until interrupted."""
+          settings: Settings | None = None, log_level: str = "info",
+          warm_up: bool = True) -> None:
+    """Runs the service with uvicorn until interrupted. With ``warm_up`` every kernel is
+    loaded (or, on a machine's first start, compiled: minutes) before the port opens, so
+    that no client's first frame waits for it (lightsched.warmup)."""
     import uvicorn
 
     settings = settings or Settings.from_env()
@@ -368,6 +371,12 @@ def serve(host: str = "127.0.0.1", port: int = 8080, demo: bool = True,
     print(f"LightSched {lightsched.__version__} on http://{host}:{port} "
           f"(docs: http://{host}:{port}/docs"
           + (", demo session id 'demo'" if demo else "") + ")", flush=True)
+    if warm_up:
+        from lightsched.warmup import warm_up as prepare
+
+        print("preparing kernels before accepting requests (compiling them takes a few "
+              "minutes on a machine's first start)", flush=True)
+        print(prepare().summary(), flush=True)
     uvicorn.run(app, **uvicorn_options(settings, log_level), host=host, port=port)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -30,8 +31,26 @@ def test_serve_help_explains_the_options():
     proc = subprocess.run([sys.executable, "-m", "lightsched", "serve", "--help"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0
-    for word in ("--host", "--port", "--no-demo", "LIGHTSCHED_API_KEYS", "LIGHTSCHED_MAX_BODY_BYTES"):
+    for word in ("--host", "--port", "--no-demo", "--no-warm-up", "LIGHTSCHED_API_KEYS",
+                 "LIGHTSCHED_MAX_BODY_BYTES"):
         assert word in proc.stdout, proc.stdout
+
+
+def test_warm_up_prepares_the_kernels_asked_for():
+    proc = subprocess.run([sys.executable, "-m", "lightsched", "warm-up", "--max-lights", "8",
+                           "--precision", "exact"], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    last = proc.stdout.strip().splitlines()[-1]
+    # A fresh process holds no kernel: each signature is loaded or compiled once.
+    loaded, compiled = (int(w) for w in re.findall(r"(\d+) (?:signatures loaded|compiled)",
+                                                   last))
+    assert last.startswith("kernels ready in ") and loaded + compiled >= 20, last
+
+
+def test_warm_up_rejects_an_unknown_precision():
+    proc = subprocess.run([sys.executable, "-m", "lightsched", "warm-up", "--precision", "half"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--precision" in proc.stderr
 
 
 def test_serve_then_a_client_drives_the_demo_session():
@@ -53,6 +72,10 @@ def test_serve_then_a_client_drives_the_demo_session():
     try:
         banner = proc.stdout.readline()
         assert f"http://127.0.0.1:{port}/docs" in banner and "demo" in banner, banner
+        # The port opens once every kernel is ready (lightsched.warmup).
+        assert "preparing kernels" in proc.stdout.readline()
+        ready = proc.stdout.readline()
+        assert ready.startswith("kernels ready in ") and "compiled" in ready, ready
         with Client(f"http://127.0.0.1:{port}") as c:
             deadline = time.monotonic() + 60
             while True:

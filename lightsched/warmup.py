@@ -1,0 +1,134 @@
+"""Every kernel signature a frame can call, made ready before the first frame needs it.
+
+Takes: the K values and precisions to prepare (by default every compiled variant: K in
+pairs.STATIC_K and one other K, exact and fast). Returns: a ``WarmUp`` summary (seconds,
+kernel signatures loaded from numba's cache and compiled).
+
+numba compiles a kernel for each new signature on its first call and keeps the machine
+code in its cache (``__pycache__`` beside the sources). A frame is the first call of ~30
+kernels: on a machine whose cache is empty the first frame of even a 1k-object scene takes
+about a minute (bench/RESULTS.md, "cold start"), longer than a client's default timeout,
+and one on a warm cache still ~0.2 s of loading, a dozen missed 60 Hz deadlines. A
+renderer compiles its shaders before the first frame for the same reason; ``warm_up``
+does it here by stepping a small generated city through every path a frame can take
+(full, incremental, objects moved, camera moved, nothing moved, removals, a cut, the
+pair cache's compaction, both kinds of object grid) for each K variant and precision.
+Some kernel arguments turn read-only after the first frames (frames are frozen and become
+the next frame's state), which is a signature of its own, hence several frames per path.
+
+``kernels`` lists the package's kernels, so that a test (tests/test_warmup.py) can show
+that no frame compiles anything once ``warm_up`` ran.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from types import ModuleType
+
+import numpy as np
+from numba.core.dispatcher import Dispatcher
+
+from .frame import PER_OBJECT, changed_rows
+from .pairs import STATIC_K
+from .scene import Camera, Config
+from .scenes import city, move_lights
+from .scheduler import Scheduler
+
+# A K compiled without a static trip count (pairs.object_pass): any K not in STATIC_K.
+GENERIC_K = next(k for k in range(2, 64) if k not in STATIC_K)
+
+
+@dataclass(frozen=True)
+class WarmUp:
+    """What ``warm_up`` did: seconds taken, and kernel signatures numba loaded from its
+    cache or compiled (over the whole process, so a second call adds nothing)."""
+
+    seconds: float
+    loaded: int
+    compiled: int
+
+    def summary(self) -> str:
+        return (f"kernels ready in {self.seconds:.1f} s: {self.loaded} signatures loaded "
+                f"from numba's cache, {self.compiled} compiled")
+
+
+def kernels(package: ModuleType | None = None) -> dict[str, Dispatcher]:
+    """The numba kernels of ``package`` (default lightsched) by qualified name: every
+    dispatcher defined in one of its imported modules."""
+    name = (package or sys.modules[__package__]).__name__
+    found = {}
+    for mod_name, module in list(sys.modules.items()):
+        if mod_name.startswith(name + ".") and module is not None:
+            for obj in vars(module).values():
+                if isinstance(obj, Dispatcher) and obj.__module__ == mod_name:
+                    found[f"{mod_name}.{obj.__name__}"] = obj
+    return found
+
+
+def cache_counts(package: ModuleType | None = None) -> tuple[int, int]:
+    """(signatures loaded from numba's cache, signatures compiled) over the package's
+    kernels in this process."""
+    loaded = compiled = 0
+    for d in kernels(package).values():
+        loaded += sum(d.stats.cache_hits.values())
+        compiled += sum(d.stats.cache_misses.values())
+    return loaded, compiled
+
+
+def warm_up(max_lights: Iterable[int] | None = None,
+            precisions: Sequence[str] = ("exact", "fast")) -> WarmUp:
+    """Steps a small city through every frame path for each K in ``max_lights`` (default
+    STATIC_K and GENERIC_K) and each precision, so that later frames of any scene with
+    those settings load or compile nothing. Leaves no state behind but numba's."""
+    t = time.perf_counter()
+    before = cache_counts()
+    for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
+        for precision in precisions:
+            _paths(Config(max_lights=int(k), precision=precision))
+    after = cache_counts()
+    return WarmUp(time.perf_counter() - t, after[0] - before[0], after[1] - before[1])
+
+
+def _paths(config: Config) -> None:
+    """One scheduler through the frame paths of scheduler.py, with shadowed point, spot
+    and directional lights."""
+    sc = city(600, 60, seed=1, shadow_fraction=0.3, sun_shadows=True)
+    lights, objects = sc.lights, sc.objects
+    wide = sc.cameras
+    # A camera low in a corner sees few of the objects: the grid of the visible ones and
+    # the invisible casters near shadowed lights (scheduler.EVERY_OBJECT_SHARE).
+    corner = np.array([-0.45 * sc.side, 3.0, -0.45 * sc.side])
+    narrow = [Camera(position=corner, forward=np.array([1.0, -0.1, 0.2]),
+                     up=np.array([0.0, 1.0, 0.0]), fov_y=0.6, aspect=1.0, near=0.5, far=200.0)]
+    s = Scheduler(config)
+    s.set_lights(**lights)
+    s.set_objects(**objects)
+    ids = lights["id"]
+    every, tenth = slice(None), slice(None, None, 10)
+    step = 0
+    prev = None
+    for cams in (wide, narrow, wide):
+        # Every light moving (a full frame), then a tenth (incremental frames, until the
+        # pair cache is compacted), then nothing (the frame is kept).
+        for moved in (every, tenth, tenth, tenth, tenth, tenth, tenth, None):
+            step += 1
+            if moved is not None:
+                s.update_lights(id=ids[moved], position=move_lights(lights, step)[moved])
+            f = s.frame(cams, dt=1 / 60)
+            if prev is not None:
+                changed_rows(prev, f, tuple(PER_OBJECT))
+            prev = f
+        # Objects moved: their pairs from a grid of just them.
+        s.update_objects(id=objects["id"][::20],
+                         bounds_min=objects["bounds_min"][::20] + 0.5,
+                         bounds_max=objects["bounds_max"][::20] + 0.5)
+        s.frame(cams, dt=1 / 60)
+        s.frame(cams, dt=1 / 60)
+    s.frame(wide, dt=1 / 60, cut=True)
+    s.remove_lights(id=ids[:5])
+    s.remove_objects(id=objects["id"][:30])
+    s.frame(wide, dt=1 / 60)
+    s.frame(narrow, dt=1 / 60)
