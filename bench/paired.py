@@ -53,9 +53,9 @@ import numpy as np
 from common import fmt_count, git_commit, machine, parse_sizes, say
 from core import DT, Motion, add_object_ids, make_scene, parse_scenarios
 from history import extract, resolve
-from numba.core.dispatcher import Dispatcher
 
 import lightsched
+from lightsched.warmup import cache_counts
 
 
 def load_package(path: Path, name: str, fresh: bool = True) -> Any:
@@ -187,21 +187,8 @@ def main(argv: list[str] | None = None) -> int:
                     f"| {r['diff_mean_ms']:+.2f} | {stage_moves(r)} |")
         say("numba kernels (signatures) loaded from the cache / compiled here: " + ", ".join(
             f"{side} {loaded} / {compiled}" for side, (loaded, compiled) in
-            ((side, cache_stats(pkg)) for side, pkg in packages.items())))
+            ((side, cache_counts(pkg)) for side, pkg in packages.items())))
     return 0
-
-
-def cache_stats(package: Any) -> tuple[int, int]:
-    """(signatures loaded from numba's cache, signatures compiled) over the package's
-    kernels, so a run shows which code it measured."""
-    loaded = compiled = 0
-    for name, module in list(sys.modules.items()):
-        if name.startswith(package.__name__ + "."):
-            for obj in vars(module).values():
-                if isinstance(obj, Dispatcher) and obj.__module__ == name:
-                    loaded += sum(obj.stats.cache_hits.values())
-                    compiled += sum(obj.stats.cache_misses.values())
-    return loaded, compiled
 
 
 if __name__ == "__main__":
