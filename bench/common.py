@@ -19,6 +19,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "RESULTS.md"
 PLOTS = HERE / "plots"
+# Seconds a `lightsched serve` process may take to answer /healthz: it opens its port once
+# every kernel is ready (lightsched.warmup), ~200 s on an empty numba cache on this box.
+SERVER_START_TIMEOUT = 900.0
 
 
 def markers(script: str) -> tuple[str, str]:

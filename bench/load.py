@@ -46,7 +46,17 @@ from typing import Any
 
 import numpy as np
 import psutil
-from common import PLOTS, fmt_count, git_commit, machine, markers, parse_count, say, write_results
+from common import (
+    PLOTS,
+    SERVER_START_TIMEOUT,
+    fmt_count,
+    git_commit,
+    machine,
+    markers,
+    parse_count,
+    say,
+    write_results,
+)
 
 from lightsched.scenes import city, move_lights
 
@@ -77,7 +87,7 @@ class Server:
     """``python -m lightsched serve`` on a free port (as bench/service.py); ``stop()``
     terminates, then kills."""
 
-    def __init__(self, env: dict[str, str], timeout: float = 60.0) -> None:
+    def __init__(self, env: dict[str, str], timeout: float = SERVER_START_TIMEOUT) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.log = tempfile.TemporaryFile()

@@ -44,7 +44,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import fmt_count, git_commit, machine, markers, parse_sizes, say, write_results
+from common import (
+    SERVER_START_TIMEOUT,
+    fmt_count,
+    git_commit,
+    machine,
+    markers,
+    parse_sizes,
+    say,
+    write_results,
+)
 
 import lightsched
 from lightsched.scenes import DT, city, move_lights
@@ -82,7 +91,7 @@ def free_port() -> int:
 class Server:
     """``python -m lightsched serve`` on a free port; ``stop()`` terminates, then kills."""
 
-    def __init__(self, timeout: float = 60.0) -> None:
+    def __init__(self, timeout: float = SERVER_START_TIMEOUT) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.log = tempfile.TemporaryFile()
