@@ -29,6 +29,12 @@ The work is light-major, in four kernels:
    segments, ``compact_heap`` packs the cache when it is mostly garbage.
 4. ``object_pass`` (parallel over objects in row order, all of them or those an
    incremental frame recomputes): state in, selection, fade, outputs out.
+A full frame whose objects, cameras and grid are the last frame's (lights drifting) takes
+steps 2 and 3 from candidate lists instead (scheduler._candidates): ``spread_lists`` lays
+out per object the lights whose widened sphere reached it, ``edit_candidates`` and
+``light_lists`` (``compact_light_lists``) follow the lights that walk the grid again, and
+``candidate_pairs`` makes
+the exact test and P of each object's candidates, in row order.
 A scene small enough for brute force is the same pipeline with a single cell.
 """
 
@@ -718,6 +724,209 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
                 pair_p_out[d] = pair_p[e]
                 pair_j_out[d] = j
                 hist[q, o] = d + 1
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
+    """The pairs of every object row from its candidate lights (scheduler._Candidates: the
+    point and spot lights whose sphere, widened by a skin, reached it when its list was
+    made, and which still lies inside that widened sphere): per candidate that competes,
+    the exact Affects test and P (_pair_p, as the light pass), then the competing
+    directional lights ``dir_rows``. So a frame whose lights moved within their skins
+    walks no grid and groups nothing, and finds the same pairs (bench/RESULTS.md, Next 10:
+    9.1 -> 3.4 ms at (100k, 10k) on captured inputs).
+
+    cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
+    integer view): the grid's records in object row order; lights = (light_hot, light_f);
+    params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]) with H
+    at least the candidates plus N * len(dir_rows). Fills out (each object's pairs at the
+    start of its room) and returns the records its rooms take."""
+    c_seg, c_j = cands
+    box, bits = recs
+    hot, lf = lights
+    o_seg, o_p, o_j = out
+    model = int(params[0])
+    w_obj = params[1]
+    w_int = params[2]
+    n = c_seg.shape[0]
+    n_dir = dir_rows.shape[0]
+    room = 0
+    for o in range(n):
+        o_seg[o, 0] = room
+        room += c_seg[o, 1] + n_dir
+    n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    for ch in nb.prange(n_chunks):
+        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            m = o_seg[o, 0]
+            ob = np.int64(bits[o, 6])
+            for t in range(c_seg[o, 0], c_seg[o, 0] + c_seg[o, 1]):
+                j = np.int64(c_j[t])
+                if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
+                    continue
+                d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
+                if d2 <= hot[j, 3] * hot[j, 3]:
+                    typ = (np.int64(hot[j, 5]) >> 3) & 3
+                    hit, p = _pair_p(hot, lf, j, typ, o, d2, box, model, w_obj, w_int)
+                    if hit:
+                        o_p[m] = p
+                        o_j[m] = j
+                        m += 1
+            for d in range(n_dir):
+                j = dir_rows[d]
+                if ob & np.int64(hot[j, 4]) != 0:
+                    o_p[m] = hot[j, 6] + hot[j, 7]
+                    o_j[m] = j
+                    m += 1
+            o_seg[o, 1] = m - o_seg[o, 0]
+    return room
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def spread_lists(start, light_j, lists):
+    """Candidate lists grouped by object (object o's at start[o]..start[o+1]-1 of
+    ``light_j``) copied into rooms with space to grow (len + 2 + len // 2 each), so that
+    ``edit_candidates`` changes them in place and they stay in row order. lists = (seg
+    [N, 2] (start, length), cap [N] (room), light row int32 [C], fill [GROUP_PARTS, 2]):
+    cand must hold the rooms' total (``list_room``); the rest is spare room, shared out
+    to the GROUP_PARTS row ranges of edit_candidates: fill[q] = (where part q's next moved
+    list goes, the end of its share)."""
+    seg, cap, cand, fill = lists
+    n = seg.shape[0]
+    at = 0
+    for o in range(n):
+        m = start[o + 1] - start[o]
+        seg[o, 0] = at
+        seg[o, 1] = m
+        cap[o] = m + 2 + m // 2
+        at += cap[o]
+    spare = (cand.shape[0] - at) // GROUP_PARTS
+    for q in range(GROUP_PARTS):
+        fill[q, 0] = at + q * spare
+        fill[q, 1] = at + (q + 1) * spare
+    for ch in nb.prange((n + OBJECT_CHUNK - 1) // OBJECT_CHUNK):
+        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            for t in range(seg[o, 1]):
+                cand[seg[o, 0] + t] = light_j[start[o] + t]
+
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def compact_light_lists(by_light, spare):
+    """The lists by light row packed into a new array with ``spare`` free records after
+    them (the segments light_lists left behind are garbage); returns (seg, object rows,
+    records used)."""
+    l_seg, l_obj = by_light
+    used = 0
+    for j in range(l_seg.shape[0]):
+        used += l_seg[j, 1]
+    new_seg = np.zeros_like(l_seg)
+    new_obj = np.empty(used + spare, np.int32)
+    at = 0
+    for j in range(l_seg.shape[0]):
+        new_seg[j, 0] = at
+        new_seg[j, 1] = l_seg[j, 1]
+        for e in range(l_seg[j, 0], l_seg[j, 0] + l_seg[j, 1]):
+            new_obj[at] = l_obj[e]
+            at += 1
+    return new_seg, new_obj, at
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def list_room(start):
+    """The total room spread_lists gives lists grouped at ``start``."""
+    at = 0
+    for o in range(start.shape[0] - 1):
+        m = start[o + 1] - start[o]
+        at += m + 2 + m // 2
+    return at
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def light_lists(walked, by_light, used):
+    """Each walked light's objects (walked = light_pass's rows, offsets, count, object
+    rows) appended to the lists by light row (by_light = (seg [L, 2], object rows [H]))
+    from record ``used``; returns the records used after them, or -1 when they do not
+    fit (nothing is written then)."""
+    rows, offsets, count, pair_obj = walked
+    l_seg, l_obj = by_light
+    total = 0
+    for t in range(rows.shape[0]):
+        total += count[t]
+    if used + total > l_obj.shape[0]:
+        return -1
+    for t in range(rows.shape[0]):
+        j = rows[t]
+        l_seg[j, 0] = used
+        l_seg[j, 1] = count[t]
+        for e in range(offsets[t], offsets[t] + count[t]):
+            l_obj[used] = pair_obj[e]
+            used += 1
+    return used
+
+
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def edit_candidates(walked, lists, by_light):
+    """The object lists of the walked lights made again in place: each walked light is
+    dropped from the lists of the objects it had (``by_light``, before ``light_lists``
+    records its new ones) and has no longer, and added to those it has now and had not.
+    A light that moved a little keeps most of its objects, so only the difference touches
+    the object lists: its new objects are stamped with its place in the walk, then its
+    old ones found by their stamp. The objects are split into GROUP_PARTS row ranges,
+    each edited by one thread in the walk's light order (so each list sees the same edits
+    in the same order whatever the threads), with its own stamps; a list that outgrows
+    its room moves to its part's spare space with twice the room. lists as spread_lists
+    made them. Returns False when a part's spare space ran out (the caller makes every
+    list again: they are half edited)."""
+    rows, offsets, count, pair_obj = walked
+    seg, cap, cand, fill = lists
+    l_seg, l_obj = by_light
+    n = seg.shape[0]
+    ok = np.ones(GROUP_PARTS, np.bool_)
+    for q in nb.prange(GROUP_PARTS):
+        lo = n * q // GROUP_PARTS
+        hi = n * (q + 1) // GROUP_PARTS
+        # stamp[o - lo]: 2t + 1 when object o is in walked light t's new list, 2t + 2 once
+        # it was found in its old one too (kept as it is).
+        stamp = np.zeros(hi - lo, np.int64)
+        for t in range(rows.shape[0]):
+            j = rows[t]
+            new = 2 * t + 1
+            for e in range(offsets[t], offsets[t] + count[t]):
+                o = pair_obj[e]
+                if lo <= o < hi:
+                    stamp[o - lo] = new
+            for e in range(l_seg[j, 0], l_seg[j, 0] + l_seg[j, 1]):
+                o = l_obj[e]
+                if o < lo or o >= hi:
+                    continue
+                if stamp[o - lo] == new:
+                    stamp[o - lo] = new + 1
+                    continue
+                a = seg[o, 0]
+                m = seg[o, 1]
+                for i in range(a, a + m):
+                    if cand[i] == j:
+                        cand[i] = cand[a + m - 1]
+                        seg[o, 1] = m - 1
+                        break
+            for e in range(offsets[t], offsets[t] + count[t]):
+                o = pair_obj[e]
+                if o < lo or o >= hi or stamp[o - lo] != new or not ok[q]:
+                    continue
+                m = seg[o, 1]
+                if m == cap[o]:
+                    room = 2 * m + 2
+                    if fill[q, 0] + room > fill[q, 1]:
+                        ok[q] = False
+                        continue
+                    for i in range(m):
+                        cand[fill[q, 0] + i] = cand[seg[o, 0] + i]
+                    seg[o, 0] = fill[q, 0]
+                    cap[o] = room
+                    fill[q, 0] += room
+                cand[seg[o, 0] + m] = j
+                seg[o, 1] = m + 1
+    return ok.all()
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -45,16 +45,22 @@ from .pairs import (
     RUN_SPLIT,
     STATIC_K,
     affects_any,
+    candidate_pairs,
     compact_heap,
+    compact_light_lists,
+    edit_candidates,
     grid_casters,
     grid_shape,
     group_pairs,
     light_bounds,
+    light_lists,
     light_order,
     light_pass,
+    list_room,
     object_pass,
     replace_lists,
     scan_pairs,
+    spread_lists,
     visible_objects,
     visible_order,
 )
@@ -85,6 +91,19 @@ FULL_SHARE = 0.5
 # position when they were made, until that camera is this far from it (metres): within
 # 2^8 m of the origin, coordinates on the 2^-16 m grid are exact in float32's 24 bits.
 REANCHOR = 256.0
+
+# Candidate lists (pairs.candidate_pairs) hold the objects within each point and spot
+# light's radius times 1 + SKIN where the list was made; the light keeps its list while its
+# sphere stays inside that one. A share of the radius is scale-free. On the city (radii
+# 5..30 m, 3 m/s) a wider skin means more candidates to test, a narrower one more lights
+# walking again: at (100k, 10k), frames 70-90 of `full` (medians), 0.05 gave 13.5 ms (1.1k
+# lights walking a frame), 0.1 13.6 (570), 0.2 14.6 (255); 0.1 keeps the walks, and their
+# spikes, small when lights move faster (RESULTS.md, candidate lists).
+SKIN = 0.1
+# Lists are made again from scratch when more than this share of the lights left theirs.
+REBUILD_SHARE = 0.5
+# False: full frames walk every light as when nothing is kept (the tests compare the two).
+CANDIDATE_LISTS = True
 
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
@@ -121,6 +140,26 @@ class _Grid:
 
 
 @dataclass
+class _Candidates:
+    """Per object row, the point and spot lights that may affect it while each stays
+    inside its anchored sphere (pairs.candidate_pairs): ``anchor`` [L, 4] is per light
+    row the centre (records' frame) and radius of the sphere its candidates were found
+    with, radius 0 for none; ``lists`` = (seg [N, 2] (start, length), cap [N], light row
+    int32, fill) the lists by object row, each in a room with space to grow
+    (pairs.spread_lists); ``by_light`` = (seg [L, 2], object row int32) the same by
+    light row, from record ``used`` on free (packed when full); ``recs`` the grid's
+    records in object row order. Valid while the objects, their visibility, the records'
+    origin and the grid are the ones they were made with (see cands_valid in
+    Scheduler._step)."""
+
+    anchor: np.ndarray
+    lists: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    by_light: tuple[np.ndarray, np.ndarray]
+    used: int
+    recs: tuple[np.ndarray, np.ndarray]
+
+
+@dataclass
 class _Cache:
     """What a frame keeps for the next one (DESIGN section 6). Store arrays are never
     changed in place, so keeping references to the ones this frame read is enough to see
@@ -152,6 +191,7 @@ class _Cache:
     # The origin of the object records and packed lights: 0 (exact precision) or, in
     # "fast" precision, the first camera's position when they were made.
     origin: np.ndarray
+    cands: _Candidates | None = None
 
 
 class Scheduler(SceneAPI):
@@ -348,7 +388,21 @@ class Scheduler(SceneAPI):
 
         model = MODEL_CONTRIBUTION if cfg.model == "contribution" else MODEL_THESIS
         p_params = np.array([model, cfg.w_obj, cfg.w_int])
-        if full:
+        # Candidate lists serve while the objects, their visibility, the records and the
+        # grid are the ones they were made with (so every record is what it was).
+        cands_valid = (CANDIDATE_LISTS and c is not None and objects_kept and grid_kept
+                       and lrows is not None and grid.shown is not None)
+        cands = c.cands if cands_valid and c is not None else None
+        if full and cands_valid:
+            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid)
+            fresh = None
+            plan["pairs"] += (
+                f"; candidate lists (each point and spot light's sphere widened by "
+                f"{SKIN:g} of its radius) " + ("made: " if built else "kept, ")
+                + f"{walk} of {int(np.count_nonzero(compete & ~is_dir))} lights walked "
+                "again (they left their widened sphere or had none)")
+            walked = np.zeros(0, np.int64)
+        elif full:
             rows = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
                                grid.grid[0], grid.grid[1])
             fresh = self._walk(packed, rows, grid, p_params, "pair")
@@ -415,7 +469,18 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "casters", t)
 
         # The pair cache: built from this frame's pairs, or the changed lists rewritten.
-        if full:
+        if full and fresh is None:
+            assert cands is not None
+            dir_rows = np.flatnonzero(compete & is_dir)
+            c_seg, _, c_j, _ = cands.lists
+            room = int(c_seg[:, 1].sum()) + n * dir_rows.size
+            seg = np.empty((n, 2), np.int64)
+            heap = (np.empty(room), np.empty(room, np.int32))
+            used = int(candidate_pairs((c_seg, c_j), cands.recs, packed, compete, dir_rows,
+                                       p_params, (seg, *heap)))
+            run = np.arange(n, dtype=np.int64)
+            plan["lists"] = "every pair from the objects' candidate lists, by object row"
+        elif full:
             start, heap = self._group(fresh, n)
             seg = np.empty((n, 2), np.int64)
             seg[:, 0] = start[:-1]
@@ -481,7 +546,7 @@ class Scheduler(SceneAPI):
             frames=frames, splits=splits, vis_l=vis_l, vis_o=vis_o, box=box, compete=compete,
             packed=packed, grid=grid, seg=seg, heap=heap, used=used, live=live,
             shadow_of_row=shadow_of_row, fading=fading, shadows_settled=settled, frame=frame,
-            casters=kept_casters, origin=origin)
+            casters=kept_casters, origin=origin, cands=cands)
         if not full:
             why = [f"{lrows.size} lights and {orows.size} objects changed",
                    "cameras " + ("unchanged" if same_cams else "moved")]
@@ -663,6 +728,77 @@ class Scheduler(SceneAPI):
                     (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
         return start, heap
 
+    def _candidates(self, old: _Candidates | None, packed: tuple[np.ndarray, np.ndarray],
+                    compete: np.ndarray, is_dir: np.ndarray, grid: _Grid
+                    ) -> tuple[_Candidates, int, bool]:
+        """The candidate lists for this frame's lights (``old`` valid or None): a competing
+        point or spot light keeps its candidates while its sphere lies inside the one they
+        were found with (|p - anchor| + r <= reach: every object it reaches is then within
+        reach of the anchor, with room for rounding); the others walk the grid again with
+        their sphere widened by SKIN, range test only (any light or object mask: masks may
+        change, the lists must not depend on them), and the lists of the objects they
+        leave or enter are edited in place (pairs.edit_candidates; a list that outgrows its
+        room moves to the spare room). All are made again when there are none, most lights
+        left theirs, or the spare room ran out. Returns (lists, lights walked, made from
+        scratch)."""
+        hot = packed[0]
+        n_l = hot.shape[0]
+        own = compete & ~is_dir
+        walk_mask = own
+        if old is not None:
+            a = old.anchor
+            dist = np.sqrt(((hot[:, :3] - a[:, :3]) ** 2).sum(axis=1))
+            room = 1e-9 * a[:, 3] + 1e-12 * np.abs(a[:, :3]).sum(axis=1)
+            walk_mask = own & ~((a[:, 3] > 0) & (dist + hot[:, 3] + room <= a[:, 3]))
+            if np.count_nonzero(walk_mask) > REBUILD_SHARE * np.count_nonzero(own):
+                old, walk_mask = None, own
+        # The walk as the light pass's with every light a point light of the widened radius
+        # and every mask bit (its P are not used).
+        wide = hot.copy()
+        wide[:, 3] *= 1.0 + SKIN
+        wide[:, 4] = float(0xFFFFFFFF)
+        wide[:, 5] = np.arange(n_l) * 32.0
+
+        def walk_of(mask: np.ndarray) -> tuple[np.ndarray, ...]:
+            rows = light_order(hot, np.flatnonzero(mask).astype(np.int32), grid.grid[0],
+                               grid.grid[1])
+            return self._walk((wide, packed[1]), rows, grid,
+                              np.array([MODEL_CONTRIBUTION, 0.0, 0.0]), "cand")
+
+        walked = walk_of(walk_mask)
+        if old is not None:
+            if edit_candidates(walked[:4], old.lists, old.by_light):
+                by_light, used = old.by_light, old.used
+                n_new = int(walked[2].sum())
+                if used + n_new > by_light[1].size:
+                    # Packed, with room for the live lists again (a few dozen frames).
+                    l_seg, l_obj, used = compact_light_lists(
+                        by_light, int(by_light[0][:, 1].sum()) + n_new + 1024)
+                    by_light = (l_seg, l_obj)
+                used = light_lists(walked[:4], by_light, used)
+                out = _Candidates(old.anchor, old.lists, by_light, used, old.recs)
+            else:
+                old, walk_mask = None, own
+                walked = walk_of(own)
+        if old is None:
+            n = grid.pos_of.size
+            start, (_, light_j) = self._group(walked, n)
+            room = int(list_room(start))
+            lists = (np.empty((n, 2), np.int64), np.empty(n, np.int64),
+                     np.empty(room + max(4096, room // 4), np.int32),
+                     np.empty((GROUP_PARTS, 2), np.int64))
+            spread_lists(start, light_j, lists)
+            by_light = (np.zeros((n_l, 2), np.int64),
+                        np.empty(2 * light_j.size + 1024, np.int32))
+            used = light_lists(walked[:4], by_light, 0)
+            box = grid.vis[0][grid.pos_of]
+            out = _Candidates(np.zeros((n_l, 4)), lists, by_light, used,
+                              (box, box.view(grid.vis[1].dtype)))
+        walk = walked[0]
+        out.anchor[walk, :3] = hot[walk, :3]
+        out.anchor[walk, 3] = wide[walk, 3]
+        return out, walk.size, old is None
+
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...], fresh_obj: Any,
                fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray
@@ -690,16 +826,9 @@ class Scheduler(SceneAPI):
             o_start, o_pairs = self._group(fresh_obj, n)
         else:
             o_start, o_pairs = np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32))
-        # The cache's heap is this frame's too (records below ``used`` are not written):
-        # new lists go after them, the heap packed first when short of room or mostly
-        # garbage. The room left after packing holds ~4 more frames like this one: with
-        # room for one, a scene moving 10% of its lights packed every other frame (~1 ms
-        # at 100k objects each time).
-        seg, heap, used = c.seg, c.heap, c.used  # the cache is this frame's to change
-        need = int(w_start[-1]) + int(seg[rows2, 1].sum()) + int(o_start[-1])
-        n_live = int(seg[:, 1].sum())
-        if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
-            seg, heap, used = compact_heap(seg, heap, 4 * need + n_live // 2 + 1024)
+        # The cache is this frame's to change.
+        seg, heap, used = _room(c.seg, c.heap, c.used, int(w_start[-1])
+                                + int(c.seg[rows2, 1].sum()) + int(o_start[-1]))
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,
                                  (w_start, w_pairs), used))
@@ -865,6 +994,19 @@ def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.nd
     ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
     big_pos = np.arange(n_small, nv, dtype=np.int32)
     return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows), pos_of
+
+
+def _room(seg: np.ndarray, heap: tuple[np.ndarray, np.ndarray], used: int, need: int
+          ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int]:
+    """A pair cache (seg, heap, records used) with room for ``need`` more records. New lists
+    go after the records in use (those are not written), the heap packed first when short
+    of room or mostly garbage. The room left after packing holds ~4 more frames like this
+    one: with room for one, a scene moving 10% of its lights packed every other frame (~1
+    ms at 100k objects each time)."""
+    n_live = int(seg[:, 1].sum())
+    if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
+        seg, heap, used = compact_heap(seg, heap, 4 * need + n_live // 2 + 1024)
+    return seg, heap, used
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

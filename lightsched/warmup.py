@@ -11,8 +11,9 @@ about a minute (bench/RESULTS.md, "cold start"), longer than a client's default 
 and one on a warm cache still ~0.2 s of loading, a dozen missed 60 Hz deadlines. A
 renderer compiles its shaders before the first frame for the same reason; ``warm_up``
 does it here by stepping a small generated city through every path a frame can take
-(full, incremental, objects moved, camera moved, nothing moved, removals, a cut, the
-pair cache's compaction, both kinds of object grid) for each K variant and precision.
+(full, from candidate lists or not, incremental, objects moved, camera moved, nothing
+moved, removals, a cut, the caches' compaction, both kinds of object grid) for each K
+variant and precision.
 Some kernel arguments turn read-only after the first frames (frames are frozen and become
 the next frame's state), which is a signature of its own, hence several frames per path.
 
@@ -110,10 +111,19 @@ def _paths(config: Config) -> None:
     every, tenth = slice(None), slice(None, None, 10)
     step = 0
     prev = None
+    # Full frames from candidate lists: every light drifting keeps or edits them; a third
+    # of the lights jumping back and forth edits them until the lists by light are packed.
+    for jump in range(10):
+        step += 1
+        pos = move_lights(lights, step)
+        pos[::3, 0] += 4.0 * (jump % 2) if jump > 1 else 0.0
+        s.update_lights(id=ids, position=pos)
+        s.frame(wide, dt=1 / 60)
     for cams in (wide, narrow, wide):
-        # Every light moving (a full frame), then a tenth (incremental frames, until the
-        # pair cache is compacted), then nothing (the frame is kept).
-        for moved in (every, tenth, tenth, tenth, tenth, tenth, tenth, None):
+        # Every light moving (full frames: the second and third from candidate lists),
+        # then a tenth (incremental frames, until the pair cache is compacted), then
+        # nothing (the frame is kept).
+        for moved in (every, every, every, tenth, tenth, tenth, tenth, tenth, tenth, None):
             step += 1
             if moved is not None:
                 s.update_lights(id=ids[moved], position=move_lights(lights, step)[moved])

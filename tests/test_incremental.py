@@ -199,7 +199,7 @@ def test_structural_changes_run_full_frames():
 
 # --------------------------------------------------------------------------- mixed runs
 
-OPS = ["none", "none", "lights", "objects", "camera", "props", "cut", "every_light"]
+OPS = ["none", "none", "lights", "objects", "camera", "props", "cut", "every_light", "drift"]
 
 
 def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict,
@@ -224,6 +224,10 @@ def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict
         if rng.uniform() < 0.5:
             lights["radius"] *= rng.choice([0.5, 2.0])
         t.update_lights(id=lights["id"], position=lights["position"], radius=lights["radius"])
+    elif op == "drift":
+        # Every light a little: a full frame from the candidate lists (kept or edited).
+        lights["position"] += rng.normal(0, 0.1, (n_l, 3))
+        t.update_lights(id=lights["id"], position=lights["position"])
     elif op == "camera":
         cams = [_moved_camera(cams[0], float(rng.normal(0, 2.0)))]
     elif op == "props":
@@ -303,6 +307,86 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
         seen.add(_plan(fa).split(":")[0])
         frames_identical(fa, fb, f"frame {i} ({op}, {_plan(fa)})")
     assert seen == {"full", "incremental", "unchanged"}, seen
+
+
+def _cand_plan(f: ls.Frame) -> str:
+    """How the frame's pairs used the candidate lists: "made", "kept" or "" (none)."""
+    m = re.search(r"candidate lists \(.*?\) (made|kept)", f.stats["plan"]["pairs"])
+    return m.group(1) if m else ""
+
+
+def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
+    """Full frames whose lights drift (objects and camera still) take their pairs from the
+    objects' candidate lists (scheduler._candidates): kept while each light stays inside
+    its widened sphere, edited for the lights that leave it (a list that outgrows its
+    room moves to the spare room), made again when the spare room runs out or most lights
+    leave. Bit for bit the frames of a scheduler that walks
+    every light every frame, through each of those, through changes that are not moves
+    (radius, type, cone, mask, intensity), lights leaving and entering the view, an
+    incremental frame between, and frames that drop the lists (camera, objects)."""
+    p = _Pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1))
+    scene = city(6_000, 600, seed=4, shadow_fraction=0.05, sun_shadows=True)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
+    lights["inner_angle"] = np.zeros(lights["id"].size)
+    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
+    p.set_lights(**lights)
+    p.set_objects(**objects)
+    cams = list(scene.cameras)
+    rng = np.random.default_rng(4)
+    local = np.flatnonzero(lights["type"] != 2)
+    some = rng.choice(local, 40, replace=False)
+    gone = some[:5]
+    away = lights["position"][gone].copy()
+    steps = ["none", "drift", "drift", "radius", "props", "jump", "cluster", "crowd", "out",
+             "back", "tenth", "drift", "camera", "drift", "objects", "drift", "far", "drift"]
+    plans = []
+    for i, step in enumerate(steps):
+        if step != "none":
+            lights["position"][local] += rng.normal(0, 0.03, (local.size, 3))
+        if step == "radius":
+            lights["radius"][some[:20]] *= 1.3
+        elif step == "props":
+            flip = some[20:30]
+            lights["type"][flip] = 1 - lights["type"][flip]
+            lights["outer_angle"][flip] = rng.uniform(0.2, 1.2, flip.size)
+            lights["mask"][some[30:]] = rng.choice(np.array([0, 1, 6], np.uint32), 10)
+            lights["intensity"][some] = rng.uniform(0.5, 50.0, some.size)
+        elif step == "jump":
+            lights["position"][some[:10]] += [40.0, 0.0, -25.0]
+        elif step == "cluster":
+            # Thirty lights beside one object: its list outgrows its room and moves.
+            lights["position"][some[10:40]] = objects["bounds_max"][0] + 1.0
+        elif step == "crowd":
+            # A third of the lights on one spot: the lists near it outgrow the spare room.
+            lights["position"][local[::3]] = objects["bounds_max"][1] + 1.0
+        elif step == "out":
+            lights["position"][gone] = [1e6, 1e6, 1e6]
+        elif step == "back":
+            lights["position"][gone] = away
+        elif step == "far":
+            lights["position"][local] += rng.normal(0, 20.0, (local.size, 3))
+        elif step == "camera":
+            cams = [_moved_camera(cams[0], 2.0)]
+        elif step == "objects":
+            rows = rng.choice(objects["id"].size, 100, replace=False)
+            objects["bounds_min"][rows] += 0.5
+            objects["bounds_max"][rows] += 0.5
+            p.update_objects(id=objects["id"][rows], bounds_min=objects["bounds_min"][rows],
+                             bounds_max=objects["bounds_max"][rows])
+        if step == "tenth":
+            rows = local[::10]
+            p.update_lights(**{k: v[rows] for k, v in lights.items()})
+        elif step != "none":
+            p.update_lights(**lights)
+        fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i} ({step}, {fa.stats['plan']['pairs']})")
+        plans.append(_cand_plan(fa))
+    if grid_kind == "every":
+        assert plans == ["", "made", "kept", "kept", "kept", "kept", "kept", "made", "kept",
+                         "kept", "", "kept", "", "made", "", "made", "made", "kept"], plans
+    else:
+        assert set(plans) == {""}, plans
 
 
 def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
