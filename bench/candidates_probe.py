@@ -120,6 +120,15 @@ def triples(obj_of_slot, p, j):
     return obj_of_slot[order], j[order], p[order].view(np.int64)
 
 
+def same_pairs(start, n, row_of, out, want, what):
+    """Asserts that the pairs a variant left in ``out`` (the first n[i] of each segment
+    start[i]; segment i is object row_of[i], or i) are ``want`` bit for bit."""
+    idx, seg = segments(start, n)
+    got = triples(seg if row_of is None else row_of[seg], out[0][idx], out[1][idx])
+    assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True)), \
+        f"{what}: other pairs than the light pass"
+
+
 def segments(start, n):
     """Indices of the first n[i] entries of each segment start[i].. and their segment."""
     seg = np.repeat(np.arange(n.size), n)
@@ -169,23 +178,14 @@ def main(argv: list[str] | None = None) -> int:
             prm = np.array([params[0], params[1], params[2], with_p])
             by_row(c_start, cand, pos_of, lights, recs, out, out_row, prm)
             if with_p:
-                idx, obj = segments(c_start, out_row)
-                got = triples(obj, out[0][idx], out[1][idx])
-                assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True)), \
-                    "by object row: other pairs than the light pass"
+                same_pairs(c_start, out_row, None, out, want, "by object row")
             by_position(p_start, p_cand, lights, recs, out, out_pos, prm)
             if with_p:
-                idx, pos = segments(p_start, out_pos)
-                got = triples(vis_rows[pos], out[0][idx], out[1][idx])
-                assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True)), \
-                    "by position: other pairs than the light pass"
+                same_pairs(p_start, out_pos, vis_rows, out, want, "by position")
             tag = f"skin {skin:g} m" + ("" if with_p else ", range test only")
             by_row(c_start, cand, row_of, lights, row_recs, out, out_row, prm)
             if with_p:
-                idx, obj = segments(c_start, out_row)
-                got = triples(obj, out[0][idx], out[1][idx])
-                assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True)), \
-                    "by object row, records by row: other pairs than the light pass"
+                same_pairs(c_start, out_row, None, out, want, "by object row, records by row")
                 variants[f"candidates by object row, {tag}"] = (
                     lambda c_start=c_start, cand=cand, out=out, o=out_row, prm=prm:
                     by_row(c_start, cand, pos_of, lights, recs, out, o, prm))

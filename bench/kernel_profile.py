@@ -45,19 +45,26 @@ import lightsched.scheduler as scheduler_module
 from lightsched.scenes import city, move_lights
 
 WINDOW = 128  # bytes of code per reported window
+# Kernels only the candidate lists' frames call (scheduler._candidates).
+CANDIDATE_KERNELS = ("candidate_pairs", "edit_candidates", "light_lists", "spread_lists",
+                     "compact_light_lists", "list_room")
 
 
 def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[Any, tuple]:
     """The kernel (as the scheduler calls it) and its arguments on the last of ``frames``
-    full frames (every light moving) of city(n_objects, n_lights)."""
+    full frames (every light moving) of city(n_objects, n_lights). Such frames take their
+    pairs from candidate lists from the second on; but for the candidate kernels, they
+    are captured with the lists off, walking every light as a frame without them does."""
     kern = getattr(scheduler_module, kernel)
     seen: dict[str, tuple] = {}
+    lists = scheduler_module.CANDIDATE_LISTS
 
     def grab(*args):
         seen["args"] = args
         return kern(*args)
 
     setattr(scheduler_module, kernel, grab)
+    scheduler_module.CANDIDATE_LISTS = kernel in CANDIDATE_KERNELS
     try:
         scene = city(n_objects, n_lights, seed=0)
         s = lightsched.Scheduler(lightsched.Config(max_lights=8))
@@ -68,6 +75,7 @@ def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[An
             s.frame(scene.cameras, dt=1 / 60)
     finally:
         setattr(scheduler_module, kernel, kern)
+        scheduler_module.CANDIDATE_LISTS = lists
     if "args" not in seen:
         raise SystemExit(f"{kernel} was not called in a full frame")
     return kern, seen["args"]
