@@ -33,8 +33,7 @@ A full frame whose objects, cameras and grid are the last frame's (lights drifti
 steps 2 and 3 from candidate lists instead (scheduler._candidates): ``spread_lists`` lays
 out per object the lights whose widened sphere reached it, ``edit_candidates`` and
 ``light_lists`` (``compact_light_lists``) follow the lights that walk the grid again, and
-``candidate_pairs`` makes
-the exact test and P of each object's candidates, in row order.
+``candidate_pairs`` makes the exact test and P of each object's candidates, in row order.
 A scene small enough for brute force is the same pipeline with a single cell.
 """
 
@@ -798,7 +797,7 @@ def spread_lists(start, light_j, lists):
         m = start[o + 1] - start[o]
         seg[o, 0] = at
         seg[o, 1] = m
-        cap[o] = m + 2 + m // 2
+        cap[o] = _room_for(m)
         at += cap[o]
     spare = (cand.shape[0] - at) // GROUP_PARTS
     for q in range(GROUP_PARTS):
@@ -808,7 +807,6 @@ def spread_lists(start, light_j, lists):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
             for t in range(seg[o, 1]):
                 cand[seg[o, 0] + t] = light_j[start[o] + t]
-
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -837,9 +835,14 @@ def list_room(start):
     """The total room spread_lists gives lists grouped at ``start``."""
     at = 0
     for o in range(start.shape[0] - 1):
-        m = start[o + 1] - start[o]
-        at += m + 2 + m // 2
+        at += _room_for(start[o + 1] - start[o])
     return at
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _room_for(m):
+    """The room of a candidate list of m lights: space for half as many again, and two."""
+    return m + 2 + m // 2
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -888,7 +891,7 @@ def edit_candidates(walked, lists, by_light):
         hi = n * (q + 1) // GROUP_PARTS
         # stamp[o - lo]: 2t + 1 when object o is in walked light t's new list, 2t + 2 once
         # it was found in its old one too (kept as it is).
-        stamp = np.zeros(hi - lo, np.int64)
+        stamp = np.zeros(hi - lo, np.int32)
         for t in range(rows.shape[0]):
             j = rows[t]
             new = 2 * t + 1
