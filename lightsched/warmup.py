@@ -32,6 +32,7 @@ from types import ModuleType
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
+from . import scheduler
 from .frame import PER_OBJECT, changed_rows
 from .pairs import STATIC_K
 from .scene import Camera, Config
@@ -86,9 +87,15 @@ def warm_up(max_lights: Iterable[int] | None = None,
     those settings load or compile nothing. Leaves no state behind but numba's."""
     t = time.perf_counter()
     before = cache_counts()
-    for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
-        for precision in precisions:
-            _paths(Config(max_lights=int(k), precision=precision))
+    # The small city takes the candidate lists' path too (large scenes only, otherwise).
+    min_objects = scheduler.CANDIDATE_MIN_OBJECTS
+    scheduler.CANDIDATE_MIN_OBJECTS = 0
+    try:
+        for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
+            for precision in precisions:
+                _paths(Config(max_lights=int(k), precision=precision))
+    finally:
+        scheduler.CANDIDATE_MIN_OBJECTS = min_objects
     after = cache_counts()
     return WarmUp(time.perf_counter() - t, after[0] - before[0], after[1] - before[1])
 

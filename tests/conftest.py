@@ -50,8 +50,10 @@ GRID_KINDS = {"every": 0.0, "visible": math.inf}
 def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     """Runs a module's tests with each kind of grid: most test scenes stand in front of the
     camera, so the scheduler's own choice (every object once half are visible) would leave
-    the grid of visible objects untested."""
-    old = scheduler.EVERY_OBJECT_SHARE
+    the grid of visible objects untested. Full frames of these modules' small scenes take
+    the candidate lists' path where it applies (large scenes only, otherwise)."""
+    old = scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS
     scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
+    scheduler.CANDIDATE_MIN_OBJECTS = 0
     yield request.param
-    scheduler.EVERY_OBJECT_SHARE = old
+    scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS = old
