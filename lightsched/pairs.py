@@ -781,6 +781,27 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     return room
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def left_spheres(hot, anchor, own):
+    """Per light row: an ``own`` light whose sphere no longer lies inside the one its
+    candidate lists were found with (anchor [L, 4]: centre and widened radius, 0 for none),
+    i.e. |p - anchor| + r > reach, with room for rounding (while it stays inside, every
+    object it reaches is within reach of the anchor). One loop, not numpy on the [L, 8]
+    records' strided columns: 0.02 against ~0.55 ms at 10k lights."""
+    out = np.zeros(hot.shape[0], np.bool_)
+    for j in range(hot.shape[0]):
+        if own[j]:
+            dx = hot[j, 0] - anchor[j, 0]
+            dy = hot[j, 1] - anchor[j, 1]
+            dz = hot[j, 2] - anchor[j, 2]
+            reach = anchor[j, 3]
+            room = 1e-9 * reach + 1e-12 * (abs(anchor[j, 0]) + abs(anchor[j, 1])
+                                          + abs(anchor[j, 2]))
+            out[j] = not (reach > 0 and math.sqrt(dx * dx + dy * dy + dz * dz) + hot[j, 3]
+                          + room <= reach)
+    return out
+
+
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def spread_lists(start, light_j, lists):
     """Candidate lists grouped by object (object o's at start[o]..start[o+1]-1 of

@@ -52,6 +52,7 @@ from .pairs import (
     grid_casters,
     grid_shape,
     group_pairs,
+    left_spheres,
     light_bounds,
     light_lists,
     light_order,
@@ -738,8 +739,7 @@ class Scheduler(SceneAPI):
                     ) -> tuple[_Candidates, int, bool]:
         """The candidate lists for this frame's lights (``old`` valid or None): a competing
         point or spot light keeps its candidates while its sphere lies inside the one they
-        were found with (|p - anchor| + r <= reach: every object it reaches is then within
-        reach of the anchor, with room for rounding); the others walk the grid again with
+        were found with (pairs.left_spheres); the others walk the grid again with
         their sphere widened by SKIN, range test only (any light or object mask: masks may
         change, the lists must not depend on them), and the lists of the objects they
         leave or enter are edited in place (pairs.edit_candidates; a list that outgrows its
@@ -751,10 +751,7 @@ class Scheduler(SceneAPI):
         own = compete & ~is_dir
         walk_mask = own
         if old is not None:
-            a = old.anchor
-            dist = np.sqrt(((hot[:, :3] - a[:, :3]) ** 2).sum(axis=1))
-            room = 1e-9 * a[:, 3] + 1e-12 * np.abs(a[:, :3]).sum(axis=1)
-            walk_mask = own & ~((a[:, 3] > 0) & (dist + hot[:, 3] + room <= a[:, 3]))
+            walk_mask = left_spheres(hot, old.anchor, own)
             if np.count_nonzero(walk_mask) > REBUILD_SHARE * np.count_nonzero(own):
                 old, walk_mask = None, own
         # The walk as the light pass's with every light a point light of the widened radius
