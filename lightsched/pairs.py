@@ -759,7 +759,8 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
             m = o_seg[o, 0]
             ob = np.int64(bits[o, 6])
-            for t in range(c_seg[o, 0], c_seg[o, 0] + c_seg[o, 1]):
+            # An object out of view (mask 0 in its record) keeps its list but pairs with none.
+            for t in range(c_seg[o, 0], c_seg[o, 0] + (c_seg[o, 1] if ob != 0 else 0)):
                 j = np.int64(c_j[t])
                 if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
                     continue

@@ -323,7 +323,9 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     leave. Bit for bit the frames of a scheduler that walks
     every light every frame, through each of those, through changes that are not moves
     (radius, type, cone, mask, intensity), lights leaving and entering the view, an
-    incremental frame between, and frames that drop the lists (camera, objects)."""
+    incremental frame between, camera moves (lists of the objects in view made again with
+    those out of view when objects come into view; then kept, the records' masks following
+    the view), and a frame that drops the lists (objects moved)."""
     p = _Pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1))
     scene = city(6_000, 600, seed=4, shadow_fraction=0.05, sun_shadows=True)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
@@ -339,8 +341,11 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     gone = some[:5]
     away = lights["position"][gone].copy()
     steps = ["none", "drift", "drift", "radius", "props", "jump", "cluster", "crowd", "out",
-             "back", "tenth", "drift", "camera", "drift", "objects", "drift", "far", "drift"]
+             "back", "tenth", "drift", "camera", "turn", "wide", "drift", "objects", "drift",
+             "far", "drift"]
     plans = []
+    entered = {}
+    seen = np.zeros(objects["id"].size, np.bool_)
     for i, step in enumerate(steps):
         if step != "none":
             lights["position"][local] += rng.normal(0, 0.03, (local.size, 3))
@@ -368,6 +373,12 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
             lights["position"][local] += rng.normal(0, 20.0, (local.size, 3))
         elif step == "camera":
             cams = [_moved_camera(cams[0], 2.0)]
+        elif step == "turn":
+            # A narrower view turned aside: objects leave it (and a few enter).
+            wide = cams
+            cams = [_turned_camera(cams[0], 0.4)]
+        elif step == "wide":
+            cams = wide
         elif step == "objects":
             rows = rng.choice(objects["id"].size, 100, replace=False)
             objects["bounds_min"][rows] += 0.5
@@ -382,9 +393,14 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
         fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
         frames_identical(fa, fb, f"frame {i} ({step}, {fa.stats['plan']['pairs']})")
         plans.append(_cand_plan(fa))
+        if step in ("camera", "turn", "wide"):
+            entered[step] = int(np.count_nonzero(fa.visible & ~seen))
+        seen = fa.visible
     if grid_kind == "every":
         assert plans == ["", "made", "kept", "kept", "kept", "kept", "kept", "made", "kept",
-                         "kept", "", "kept", "", "made", "", "made", "made", "kept"], plans
+                         "kept", "", "kept", "made", "kept", "kept", "kept", "", "made",
+                         "made", "kept"], plans
+        assert entered["camera"] > 0 and entered["wide"] > 100, entered
     else:
         assert set(plans) == {""}, plans
 
