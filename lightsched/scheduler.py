@@ -772,7 +772,7 @@ class Scheduler(SceneAPI):
         if old is not None:
             walk_mask = left_spheres(hot, old.anchor, own)
             if np.count_nonzero(walk_mask) > REBUILD_SHARE * np.count_nonzero(own):
-                old, walk_mask, hold = None, own, hold or hidden
+                old, walk_mask, hold = None, own, hidden
         # The walk as the light pass's with every light a point light of the widened radius
         # and every mask bit (its P are not used).
         wide = hot.copy()
@@ -814,7 +814,7 @@ class Scheduler(SceneAPI):
                 used = light_lists(walked[:4], by_light, used)
                 out = _Candidates(old.anchor, old.lists, by_light, used, old.recs, hold)
             else:
-                old, walk_mask, hold = None, own, hold or hidden
+                old, walk_mask, hold = None, own, hidden
                 walked = walk_of(own)
         if old is None:
             n = grid.pos_of.size
