@@ -29,11 +29,13 @@ The work is light-major, in four kernels:
    segments, ``compact_heap`` packs the cache when it is mostly garbage.
 4. ``object_pass`` (parallel over objects in row order, all of them or those an
    incremental frame recomputes): state in, selection, fade, outputs out.
-A full frame whose objects, cameras and grid are the last frame's (lights drifting) takes
-steps 2 and 3 from candidate lists instead (scheduler._candidates): ``spread_lists`` lays
-out per object the lights whose widened sphere reached it, ``edit_candidates`` and
-``light_lists`` (``compact_light_lists``) follow the lights that walk the grid again, and
-``candidate_pairs`` makes the exact test and P of each object's candidates, in row order.
+A full frame whose objects and grid of every object are the last frame's (lights drifting,
+the camera still or moving) takes steps 2 and 3 from candidate lists instead
+(scheduler._candidates): ``left_spheres`` finds the lights that left the sphere their lists
+were made with, ``spread_lists`` lays out per object the lights whose widened sphere
+reached it, ``edit_candidates`` and ``light_lists`` (``compact_light_lists``) follow the
+lights that walk the grid again, and ``candidate_pairs`` makes the exact test and P of
+each object's candidates, in row order.
 A scene small enough for brute force is the same pipeline with a single cell.
 """
 
