@@ -412,7 +412,8 @@ class Scheduler(SceneAPI):
                 # Lists of the objects in view only: those entering it may lack lights.
                 cands = None
             else:
-                cands.recs[1][rows, 6] = np.where(vis_o[rows], objs.mask[rows], 0)
+                # The grid's records have theirs already (_every_grid).
+                cands.recs[1][rows, 6] = grid.vis[1][grid.pos_of[rows], 6]
         if full and cands_valid:
             cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid,
                                                   not same_cams)
