@@ -8,7 +8,10 @@ returns the new end. After the light's whole walk, point_priority (a point light
 spot_priority (a spot light: the cone, then the spot factor) turn the hits into (object
 row, P) in place, under the contribution model. pairs.light_pass uses point_run for every
 point and spot light with float64 records, and finishes the thesis model's hits with its
-scalar code; "fast" float32 records keep the scalar loop throughout.
+scalar code; "fast" float32 records keep the scalar loop throughout. candidate_run turns
+the lanes around for the candidate lists (pairs.candidate_pairs): one object against eight
+of its candidate lights a step, each light's 64-byte row of light_hot loaded whole and
+transposed as the objects' records are here, the same rule and operations lane by lane.
 
 Why LLVM IR: the scalar loop spends most of its time on the range test and the compaction
 of the survivors, one candidate at a time; LLVM's loop vectoriser does not vectorise a
@@ -45,6 +48,7 @@ from numba.core.codegen import get_host_cpu_features
 from numba.core.extending import intrinsic
 
 from .priority import R0
+from .scene import SPOT
 
 LANES = 8
 RECORD = 8  # float64 words per object record
@@ -114,18 +118,21 @@ class _Run:
     """IR of one point_run call: the light's constants as vectors and the intrinsics."""
 
     def __init__(self, builder: ir.IRBuilder, light: list[ir.Value], in_register: bool):
+        """light = (x, y, z, r, mask, i, p_user): one light's scalars (splat to every
+        lane) or vectors (one light a lane, as candidate_run takes them)."""
         b = self.b = builder
         self.in_register = in_register
         self.zero = ir.Constant(_VF, [0.0] * LANES)
         self.one = ir.Constant(_VF, [1.0] * LANES)
         self.iota = ir.Constant(_VI64, list(range(LANES)))
-        self.p = [_splat(b, x, _VF) for x in light[:3]]
-        r = _splat(b, light[3], _VF)
+        light = [x if isinstance(x.type, ir.VectorType) else _splat(b, x, _VF) for x in light]
+        self.p = light[:3]
+        r = light[3]
         self.rr = b.fmul(r, r)
         self.four_rr = b.fmul(b.fmul(ir.Constant(_VF, [4.0] * LANES), r), r)
-        self.mask = _splat(b, b.fptosi(light[4], _I64), _VI64)
-        self.intensity = _splat(b, light[5], _VF)
-        self.p_user = _splat(b, light[6], _VF)
+        self.mask = b.fptosi(light[4], _VI64)
+        self.intensity = light[5]
+        self.p_user = light[6]
         self.maxnum = _declare(b, "llvm.maxnum.v8f64", _VF, [_VF, _VF])
         self.minnum = _declare(b, "llvm.minnum.v8f64", _VF, [_VF, _VF])
         self.load_f = _declare(b, "llvm.masked.load.v8f64.p0", _VF,
@@ -151,12 +158,27 @@ class _Run:
 
     def records_at(self, box: ir.Value, at: ir.Value) -> list[ir.Value]:
         """The fields of the records at positions ``at`` (every lane a valid position)."""
-        b = self.b
+        return _Run.fields_at(self.b, box, at)
+
+    @staticmethod
+    def fields_at(b: ir.IRBuilder, table: ir.Value, at: ir.Value, lanes: ir.Value | None = None
+                  ) -> list[ir.Value]:
+        """The fields of the 8-word rows ``at`` of ``table`` (every lane a valid row); with
+        ``lanes``, only those rows are read (zeros elsewhere: a masked load touches no
+        memory, so a row not needed costs no cache miss)."""
         recs = []
         for k in range(LANES):
             v = b.extract_element(at, ir.Constant(_I32, k))
-            ptr = b.gep(box, [b.mul(v, ir.Constant(_I64, RECORD))])
-            recs.append(b.load(b.bitcast(ptr, ir.PointerType(_VF)), align=8))
+            ptr = b.bitcast(b.gep(table, [b.mul(v, ir.Constant(_I64, RECORD))]),
+                            ir.PointerType(_VF))
+            if lanes is None:
+                recs.append(b.load(ptr, align=8))
+                continue
+            load = _declare(b, "llvm.masked.load.v8f64.p0", _VF,
+                            [ir.PointerType(_VF), _I32, _VB, _VF])
+            live = _splat(b, b.extract_element(lanes, ir.Constant(_I32, k)), _VB)
+            recs.append(b.call(load, [ptr, ir.Constant(_I32, 8), live,
+                                      ir.Constant(_VF, [0.0] * LANES)]))
         return _transpose(b, recs)
 
     def masked(self, load: ir.Function, ptr: ir.Value, lanes: ir.Value,
@@ -434,6 +456,100 @@ def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1)
     return sig, codegen
 
 
+def _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j) -> bool:
+    """Whether the arguments are those candidate_run takes."""
+    arrays = (box, hot, lf, compete, c_j, out_p, out_j)
+    return (all(isinstance(a, types.Array) and a.layout == "C" for a in arrays)
+            and box.dtype in (types.float64, types.float32) and box.ndim == 2
+            and hot.dtype == lf.dtype == types.float64 and hot.ndim == lf.ndim == 2
+            and compete.dtype == types.boolean and compete.ndim == 1
+            and c_j.dtype == out_j.dtype == types.int32 and c_j.ndim == out_j.ndim == 1
+            and out_p.dtype == types.float64 and out_p.ndim == 1)
+
+
+@intrinsic(prefer_literal=False)
+def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
+    """The pairs of object row o (record o of ``box``, [N, 8] float64) with its candidate
+    lights c_j[a:b] (point and spot rows of hot / lf, light_hot and light_f: [L, 8] float64
+    each), appended from m to out_p (P) / out_j (light row), in candidate order; returns
+    the new end. The rule of pairs.candidate_pairs' scalar loop under the contribution
+    model, bit for bit: a light that competes (``compete``, bool [L]) with a mask bit of
+    the object's, d2 <= r*r (priority.box_d2), for a spot the cone (priority.spot_cone on
+    the bounding sphere), P = falloff * s + p_user (s = 1 for a point light: the same bits
+    as falloff + p_user). Here the lanes are eight candidate lights against the one
+    object (its fields in every lane), where point_run has eight objects against one
+    light: each light's record is one 64-byte row, loaded whole and transposed like the
+    objects' records; the spots' rows of light_f only in steps that hold a spot that
+    passed the range test. For float32 records ("fast") returns -1 at once: the caller
+    runs its scalar loop. The caller guarantees the object has a mask bit (its record's
+    mask is not 0) and the room: at most one pair per candidate."""
+    if not _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j):
+        return None
+    sig = types.int64(box, types.int64, hot, lf, compete, c_j, types.int64, types.int64,
+                      out_p, out_j, types.int64)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[0].dtype != types.float64:
+            return ir.Constant(_I64, -1)
+        at_ = (0, 2, 3, 4, 5, 8, 9)
+        kinds = (_F64, _F64, _F64, _I8, _I32, _F64, _I32)
+        box_ptr, hot_ptr, lf_ptr, comp_ptr, cj_ptr, p_ptr, j_ptr = [
+            builder.bitcast(context.make_array(signature.args[k])(context, builder,
+                                                                  args[k]).data,
+                            ir.PointerType(t)) for k, t in zip(at_, kinds, strict=True)]
+        o_, a_, b_, m0 = args[1], args[6], args[7], args[10]
+        rec = builder.load(builder.bitcast(
+            builder.gep(box_ptr, [builder.mul(o_, ir.Constant(_I64, RECORD))]),
+            ir.PointerType(_VF)), align=8)
+        f = [builder.shuffle_vector(rec, ir.Constant(_VF, ir.Undefined),
+                                    ir.Constant(_VI32, [k] * LANES)) for k in range(RECORD)]
+        m_slot = cgutils.alloca_once_value(builder, m0)
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        with cgutils.for_range_slice(builder, a_, b_, ir.Constant(_I64, LANES)) as (i, _):
+            lanes = builder.icmp_signed("<", iota, _splat(builder, builder.sub(b_, i), _VI64))
+            load_i32 = _declare(builder, "llvm.masked.load.v8i32.p0", _VI32,
+                                [ir.PointerType(_VI32), _I32, _VB, _VI32])
+            rows32 = builder.call(load_i32, [
+                builder.bitcast(builder.gep(cj_ptr, [i]), ir.PointerType(_VI32)),
+                ir.Constant(_I32, 4), lanes, ir.Constant(_VI32, [0] * LANES)])
+            rows = builder.sext(rows32, _VI64)
+            # Lanes past the end read light row 0, which exists (there are candidates).
+            light = _Run.fields_at(builder, hot_ptr, rows)
+            run = _Run(builder, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            comp = ir.Constant(ir.VectorType(_I8, LANES), ir.Undefined)
+            for k in range(LANES):
+                row = builder.extract_element(rows, ir.Constant(_I32, k))
+                comp = builder.insert_element(comp, builder.load(builder.gep(comp_ptr, [row])),
+                                              ir.Constant(_I32, k))
+            live = builder.and_(lanes, builder.icmp_unsigned(
+                "!=", comp, ir.Constant(ir.VectorType(_I8, LANES), [0] * LANES)))
+            hit, d2 = run.hits(f, live)
+            typ = builder.and_(builder.ashr(builder.fptosi(light[5], _VI64),
+                                            ir.Constant(_VI64, [3] * LANES)),
+                               ir.Constant(_VI64, [3] * LANES))
+            spot = builder.icmp_signed("==", typ, ir.Constant(_VI64, [SPOT] * LANES))
+            hit_slot = cgutils.alloca_once_value(builder, hit)
+            s_slot = cgutils.alloca_once_value(builder, run.one)
+            spot_hit = builder.and_(hit, spot)
+            any_spot = builder.bitcast(spot_hit, _I8)
+            with builder.if_then(builder.icmp_unsigned("!=", any_spot, ir.Constant(_I8, 0))):
+                meets, s = run.cone(f, _Run.fields_at(builder, lf_ptr, rows, spot_hit)[:6])
+                builder.store(builder.and_(hit, builder.or_(builder.not_(spot), meets)),
+                              hit_slot)
+                builder.store(builder.select(spot, s, run.one), s_slot)
+            hit = builder.load(hit_slot)
+            p = builder.fadd(builder.fmul(run.priority(d2, f[7], hit), builder.load(s_slot)),
+                             run.p_user)
+            count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
+            m = builder.load(m_slot)
+            run.append(p, hit, builder.gep(p_ptr, [m]), count)
+            run.append(rows32, hit, builder.gep(j_ptr, [m]), count)
+            builder.store(builder.add(m, count), m_slot)
+        return builder.load(m_slot)
+
+    return sig, codegen
+
+
 @intrinsic(prefer_literal=False)
 def prefetch_row(typingctx, table, row):
     """Asks the cache for the start of ``table[row]`` (a C-order 2-D array) without waiting
@@ -460,5 +576,5 @@ def prefetch_row(typingctx, table, row):
     return sig, codegen
 
 
-__all__ = ["LANES", "PACK_IN_REGISTER", "point_priority", "point_run", "prefetch_row",
+__all__ = ["LANES", "PACK_IN_REGISTER", "candidate_run", "point_priority", "point_run", "prefetch_row",
            "spot_priority", "target_features"]

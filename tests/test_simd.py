@@ -2,9 +2,11 @@
 == the scalar rule they replace (priority.box_d2, the mask, priority.falloff + p_user: the
 point light's branch of pairs._exact_pair), bit for bit, on generated records and runs;
 point_run alone == the range test and the mask (the hits' positions and d2, which the
-light pass finishes for other lights); with both ways of packing the lanes (an AVX-512
-register where the target has it, the portable compress store), and without a store past
-the pairs it appends."""
+light pass finishes for other lights); simd.spot_priority == the spot branch;
+simd.candidate_run (one object against its candidate point and spot lights) == the scalar
+loop of pairs.candidate_pairs. With both ways of packing the lanes (an AVX-512 register
+where the target has it, the portable compress store), and without a store past the pairs
+they append."""
 
 from __future__ import annotations
 
@@ -16,9 +18,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import _finish_hits, visible_objects
+from lightsched.pairs import _finish_hits, _pair_p, visible_objects
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
-from lightsched.scene import SPOT
+from lightsched.scene import POINT, SPOT
 
 finite = {"allow_nan": False, "allow_infinity": False}
 SENTINEL_ROW = -7
@@ -74,13 +76,19 @@ def _compiled(in_register: bool):
         def spot(box, rows, light, axis, out_obj, out_p, n0, n1):
             return simd.spot_priority(box, rows, light, axis, out_obj, out_p, n0, n1)
 
+        @nb.njit(nogil=True, error_model="numpy")
+        def candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
+            return simd.candidate_run(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m)
+
         box = np.zeros((1, 8))
+        candidates(box, 0, box, box, np.ones(1, np.bool_), np.zeros(1, np.int32), 0, 1,
+                   np.zeros(1), np.zeros(1, np.int32), 0)
         for kernel in (run, hits):
             kernel(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
                    np.zeros(1), 0)
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
-        return run, hits, spot
+        return run, hits, spot, candidates
     finally:
         simd.PACK_IN_REGISTER = before
 
@@ -91,6 +99,7 @@ COMPILED = {packing: _compiled(packing) for packing in PACKINGS}
 KERNELS = {packing: kernels[0] for packing, kernels in COMPILED.items()}
 HITS = {packing: kernels[1] for packing, kernels in COMPILED.items()}
 SPOTS = {packing: kernels[2] for packing, kernels in COMPILED.items()}
+CANDIDATES = {packing: kernels[3] for packing, kernels in COMPILED.items()}
 
 
 @st.composite
@@ -268,15 +277,149 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
     assert (out_obj == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
 
 
+@nb.njit(nogil=True, error_model="numpy")
+def scalar_candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
+    """The scalar loop of pairs.candidate_pairs for one object under the contribution
+    model: a competing light with a mask bit of the object's, in range, then _pair_p."""
+    ob = np.int64(box.view(np.int64)[o, 6])
+    for t in range(a, b):
+        j = np.int64(c_j[t])
+        if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
+            continue
+        d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
+        if d2 <= hot[j, 3] * hot[j, 3]:
+            hit, p = _pair_p(hot, lf, j, (np.int64(hot[j, 5]) >> 3) & 3, o, d2, box,
+                             MODEL_CONTRIBUTION, 0.0, 0.0)
+            if hit:
+                out_p[m] = p
+                out_j[m] = j
+                m += 1
+    return m
+
+
+@st.composite
+def object_and_candidates(draw):
+    """One object's record among a few, and point and spot lights around it (some not
+    competing, some of other mask bits, some out of range), as candidate_pairs gets them."""
+    origin = draw(st.sampled_from([0.0, 1e7, -3e5]))
+    coord = st.one_of(st.integers(-6, 6).map(float), st.floats(-30.0, 30.0, **finite))
+    extent = st.one_of(st.just(0.0), st.integers(0, 4).map(float),
+                       st.floats(0.0, 20.0, **finite), st.just(200.0))
+    n = draw(st.integers(1, 3))
+    lo = np.array([[draw(coord) + origin for _ in range(3)] for _ in range(n)])
+    hi = lo + np.array([[draw(extent) for _ in range(3)] for _ in range(n)])
+    masks = np.array([draw(st.sampled_from([0xFFFFFFFF, 1, 6, 0x80000001]))
+                      for _ in range(n)], np.uint32)
+    n_l = draw(st.integers(1, 20))
+    hot = np.zeros((n_l, 8))
+    lf = np.zeros((n_l, 8))
+    for j in range(n_l):
+        typ = draw(st.sampled_from([POINT, POINT, SPOT]))
+        hot[j] = (draw(coord) + origin, draw(coord) + origin, draw(coord) + origin,
+                  draw(st.one_of(st.floats(1e-3, 60.0, **finite),
+                                 st.sampled_from([1.0, 5.0, 25.0]))),
+                  float(draw(st.sampled_from([0xFFFFFFFF, 1, 2, 0x80000000]))),
+                  j * 32 + typ * 8, draw(st.one_of(st.just(0.0), st.floats(0.0, 100.0, **finite))),
+                  draw(st.one_of(st.just(0.0), st.floats(-3.0, 3.0, **finite))))
+        lf[j, :6] = draw(spot_cones())
+    compete = np.array(draw(st.lists(st.booleans(), min_size=n_l, max_size=n_l)), np.bool_)
+    compete |= np.array([draw(st.integers(0, 3)) > 0 for _ in range(n_l)])
+    c_j = np.array(draw(st.lists(st.integers(0, n_l - 1), max_size=30)), np.int32)
+    a = draw(st.integers(0, c_j.size))
+    b = draw(st.integers(a, c_j.size))
+    return lo, hi, masks, draw(st.integers(0, n - 1)), hot, lf, compete, c_j, a, b
+
+
+@examples(3.0)
+@given(case=object_and_candidates(), start=st.integers(0, 5))
+def test_candidate_run_equals_the_scalar_loop(case, start):
+    """candidate_run == candidate_pairs' scalar loop: the same pairs (the mask, the range
+    test, the cone of a spot) in candidate order, P bit for bit, nothing written past them."""
+    lo, hi, masks, o, hot, lf, compete, c_j, a, b = case
+    n = lo.shape[0]
+    recs = np.zeros((n, 8))
+    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+                    np.zeros(3))
+    size = start + (b - a) + 16
+    want = (np.full(size, SENTINEL_P), np.full(size, SENTINEL_ROW, np.int32))
+    want_end = scalar_candidates(recs, o, hot, lf, compete, c_j, a, b, *want, start)
+    for packing, kernel in CANDIDATES.items():
+        got = (np.full(size, SENTINEL_P), np.full(size, SENTINEL_ROW, np.int32))
+        assert kernel(recs, o, hot, lf, compete, c_j, a, b, *got, start) == want_end, packing
+        assert np.array_equal(got[0].view(np.int64), want[0].view(np.int64)), packing
+        assert np.array_equal(got[1], want[1]), packing
+
+
+@pytest.mark.parametrize("packing", PACKINGS)
+def test_candidate_run_on_objects_around_spots_and_points(packing):
+    """Many objects, each against every light of a mixed set of point and spot lights
+    (smooth and step profiles, some not competing, some of other mask bits): the scalar
+    loop's pairs and P, with pairs kept by both kinds and some spot pairs lit."""
+    rng = np.random.default_rng(17)
+    n, n_l = 400, 37
+    centre = rng.normal(size=(n, 3)) * 12.0
+    half = rng.choice([0.0, 0.3, 2.0, 9.0], size=(n, 1)) * rng.uniform(0, 1, (n, 3))
+    recs = np.zeros((n, 8))
+    masks = rng.choice(np.array([0xFFFFFFFF, 1, 2], np.uint32), n)
+    visible_objects(centre - half, centre + half, masks, np.arange(n), n,
+                    (recs, recs.view(np.int64)), np.zeros(3))
+    hot = np.zeros((n_l, 8))
+    lf = np.zeros((n_l, 8))
+    typ = np.where(np.arange(n_l) % 3 == 0, SPOT, POINT)
+    hot[:, :3] = rng.normal(size=(n_l, 3)) * 10.0
+    hot[:, 3] = rng.uniform(2.0, 30.0, n_l)
+    hot[:, 4] = rng.choice([float(0xFFFFFFFF), 1.0, 2.0], n_l)
+    hot[:, 5] = np.arange(n_l) * 32 + typ * 8
+    hot[:, 6] = rng.uniform(1.0, 50.0, n_l)
+    hot[:, 7] = rng.uniform(-1.0, 1.0, n_l)
+    axis = rng.normal(size=(n_l, 3))
+    lf[:, :3] = axis / np.linalg.norm(axis, axis=1, keepdims=True)
+    outer = rng.uniform(0.2, 1.4, n_l)
+    inner = np.where(np.arange(n_l) % 2 == 0, outer, outer * 0.5)
+    lf[:, 3], lf[:, 4] = np.cos(outer), np.sin(outer)
+    lf[:, 5] = np.where(inner == outer, np.nan, np.cos(inner))
+    compete = rng.uniform(size=n_l) < 0.9
+    c_j = rng.permutation(n_l).astype(np.int32)
+    kinds = set()
+    for o in range(n):
+        want = (np.zeros(n_l), np.zeros(n_l, np.int32))
+        got = (np.zeros(n_l), np.zeros(n_l, np.int32))
+        end = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
+        assert CANDIDATES[packing](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == end
+        assert np.array_equal(got[0][:end].view(np.int64), want[0][:end].view(np.int64))
+        assert np.array_equal(got[1][:end], want[1][:end])
+        lit = set(want[1][:end][want[0][:end] - hot[want[1][:end], 7] > 0].tolist())
+        reach = [j for j in range(n_l) if compete[j] and int(hot[j, 4]) & int(masks[o])
+                 and box_d2(recs, o, *hot[j, :3]) <= hot[j, 3] ** 2]
+        kinds |= {(int(typ[j]), j in want[1][:end], j in lit) for j in reach}
+    # Lit pairs of both kinds, and spots in range whose cone misses the object.
+    assert {(POINT, True, True), (SPOT, True, True), (SPOT, False, False)} <= kinds
+
+
+def test_candidate_run_leaves_float32_records_to_the_scalar_loop():
+    """"fast" precision's float32 records: -1 and nothing written."""
+    out_p, out_j = np.full(4, SENTINEL_P), np.full(4, SENTINEL_ROW, np.int32)
+    hot = np.zeros((1, 8))
+
+    @nb.njit(nogil=True, error_model="numpy")
+    def run(box):
+        return simd.candidate_run(box, 0, hot, hot, np.ones(1, np.bool_),
+                                  np.zeros(4, np.int32), 0, 4, out_p, out_j, 0)
+
+    assert run(np.zeros((1, 8), np.float32)) == -1
+    assert (out_j == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
+
+
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
            "+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,-avx512f,-avx512vl")
 WITHOUT_AVX512 = """
 import numpy as np
 import lightsched.simd as simd
 from lightsched.pairs import visible_objects
-from test_simd import KERNELS, scalar_run
+from test_simd import CANDIDATES, KERNELS, scalar_candidates, scalar_run
 assert not simd.PACK_IN_REGISTER and list(KERNELS) == [False]
 assert "zmm" not in "".join(KERNELS[False].inspect_asm().values())
+assert "zmm" not in "".join(CANDIDATES[False].inspect_asm().values())
 rng = np.random.default_rng(5)
 n = 200
 lo = rng.uniform(-20, 20, (n, 3))
@@ -294,13 +437,31 @@ for _ in range(300):
     k = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want, 3)
     assert KERNELS[False](recs, rows, v0, v1, light, *got, 3) == k
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+n_l = 40
+hot = np.zeros((n_l, 8))
+hot[:, :3] = rng.uniform(-20, 20, (n_l, 3))
+hot[:, 3] = rng.uniform(1, 15, n_l)
+hot[:, 4] = rng.integers(1, 4, n_l)
+hot[:, 5] = np.arange(n_l) * 32 + (np.arange(n_l) % 3 == 0) * 8
+hot[:, 6] = rng.uniform(0, 10, n_l)
+lf = np.zeros((n_l, 8))
+lf[:, 1], lf[:, 3], lf[:, 4], lf[:, 5] = -1.0, np.cos(0.8), np.sin(0.8), np.cos(0.4)
+compete = rng.uniform(size=n_l) < 0.9
+c_j = rng.permutation(n_l).astype(np.int32)
+for o in range(n):
+    want = (np.zeros(n_l), np.zeros(n_l, np.int32))
+    got = (np.zeros(n_l), np.zeros(n_l, np.int32))
+    k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
+    assert CANDIDATES[False](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 print("ok")
 """
 
 
 def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
     """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
-    packing, emits no 512-bit code, and gives the scalar rule's pairs."""
+    packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run and
+    candidate_run)."""
     import os
     import subprocess
     import sys
