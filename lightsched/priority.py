@@ -26,6 +26,19 @@ from .scene import DIRECTIONAL, LightStore
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
+CACHE_LINE = 64  # bytes
+
+
+def aligned_empty(shape: int | tuple[int, ...], dtype: object = np.float64) -> np.ndarray:
+    """An uninitialised C-order array that starts on a cache line. numpy gives 16 bytes of
+    alignment (a large array: a page plus malloc's 16-byte header) and numba's allocator
+    32, so a 64-byte row (a packed light, an object record) would straddle two lines and
+    every row read at random (a candidate list's lights, a spot's hits) would miss twice."""
+    dt = np.dtype(dtype)
+    size = int(np.prod(shape)) * dt.itemsize
+    buf = np.empty(size + CACHE_LINE, np.uint8)
+    at = -buf.ctypes.data % CACHE_LINE
+    return buf[at:at + size].view(dt).reshape(shape)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -55,16 +68,18 @@ def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
             if a > best:
                 best = a
         lf[j, 7] = best
+    else:
+        lf[j, 7] = 0.0
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _pack(store, cams, thesis_w, origin):
+def _pack(store, cams, thesis_w, origin, out):
     """store = the light store's (type, position, radius, direction, outer_angle,
     inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,
-    tan_xy, focus), zero cameras for the contribution model (column 7 stays -inf)."""
+    tan_xy, focus), zero cameras for the contribution model (column 7 stays -inf);
+    out = (hot, lf), [L, 8] each, every element written."""
     n = store[0].shape[0]
-    hot = np.zeros((n, 8))
-    lf = np.zeros((n, 8))
+    hot, lf = out
     if n < SERIAL_LIGHTS:
         for j in range(n):
             _pack_row(j, hot, lf, store, cams, thesis_w, origin)
@@ -91,8 +106,10 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     cams = slice(None) if camera_term else slice(0)
     cam_columns = (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
                    frames.focus[cams])
+    n = len(lights.id)
     return _pack(light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
-                 np.zeros(3) if origin is None else origin)
+                 np.zeros(3) if origin is None else origin,
+                 (aligned_empty((n, 8)), aligned_empty((n, 8))))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

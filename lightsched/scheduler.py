@@ -65,7 +65,7 @@ from .pairs import (
     visible_objects,
     visible_order,
 )
-from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, pack_lights
+from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, aligned_empty, pack_lights
 from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
 from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_casters
 
@@ -226,7 +226,7 @@ class Scheduler(SceneAPI):
         steady scene allocates no pair or record memory per frame."""
         buf = self._buffers.get(name)
         if buf is None or buf.size < size or buf.dtype != dtype:
-            buf = np.empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
+            buf = aligned_empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
             self._buffers[name] = buf
         return buf
 
@@ -828,7 +828,8 @@ class Scheduler(SceneAPI):
             by_light = (np.zeros((n_l, 2), np.int64),
                         np.empty(2 * light_j.size + 1024, np.int32))
             used = light_lists(walked[:4], by_light, 0)
-            box = grid.vis[0][grid.pos_of]
+            box = np.take(grid.vis[0], grid.pos_of, axis=0, mode="wrap",
+                          out=aligned_empty((n, 8), grid.vis[0].dtype))
             out = _Candidates(np.zeros((n_l, 4)), lists, by_light, used,
                               (box, box.view(grid.vis[1].dtype)), hold)
         walk = walked[0]

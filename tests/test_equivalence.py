@@ -398,13 +398,17 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     n, few = len(lights), SERIAL_LIGHTS - 1
     f = c.frames
 
+    UNSET = -7.25e300
+
     def pack(m: int) -> tuple[np.ndarray, np.ndarray]:
         store = tuple(a[:m] for a in light_columns(lights))
         return _pack(store, (f.position, f.basis, f.tan_xy, f.focus),
-                     np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3))
+                     np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3),
+                     (np.full((m, 8), UNSET), np.full((m, 8), UNSET)))
 
     for a, b in zip(pack(n), pack(few), strict=True):
         assert np.array_equal(a[:few], b, equal_nan=True)
+        assert not (a == UNSET).any()  # every element written
     vis = [lights_visible(lights.type[:m], lights.position[:m], lights.radius[:m], f.plane_n,
                           f.plane_p) for m in (n, few)]
     assert np.array_equal(vis[0][:few], vis[1]) and vis[1].any() and not vis[1].all()
@@ -412,6 +416,8 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.grid, n_vis)
               for m in (n, few)]
     assert np.array_equal(bounds[0][:few + 1], bounds[1]) and bounds[1][-1] > 0
+    # The rows read at random (packed lights, object records) start on a cache line.
+    assert all(a.ctypes.data % 64 == 0 for a in (*c.packed, *s._buffers.values()))
 
 
 def test_grid_with_big_objects_big_lights_and_directional_in_slots():
