@@ -106,9 +106,10 @@ REBUILD_SHARE = 0.5
 # False: full frames walk every light as when nothing is kept (the tests compare the two).
 CANDIDATE_LISTS = True
 # Grids of fewer objects walk every light: there the lists' upkeep costs more than the walk
-# and the grouping they save (bench/paired.py, cached code, `full`: 1k objects +0.04 ms of
-# 0.55, 10k +-0.08 of ~2, 100k -1.79 of 15.5, 1M -13.7 of 145).
-CANDIDATE_MIN_OBJECTS = 1 << 15
+# and the grouping they save (bench/paired.py, cached code, `full`, since the candidates
+# run in vector code: 1k objects +0.01 ms of 0.57, 3k -0.04 of 1.0, 10k -0.16 of 1.9;
+# before it 10k was +-0.08, so the threshold was 2^15).
+CANDIDATE_MIN_OBJECTS = 1 << 12
 
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
