@@ -755,6 +755,9 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     w_int = params[2]
     n = c_seg.shape[0]
     n_dir = dir_rows.shape[0]
+    # candidate_run reads whole 8-word rows.
+    vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
+              and lf.shape[1] == 8)
     room = 0
     for o in range(n):
         o_seg[o, 0] = room
@@ -767,7 +770,7 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
             # An object out of view (mask 0 in its record) keeps its list but pairs with none.
             a = c_seg[o, 0]
             b = a + (c_seg[o, 1] if ob != 0 else 0)
-            if model == MODEL_CONTRIBUTION and b > a:
+            if vector and b > a:
                 # Float64 records: eight candidates a step in vector code (-1: float32).
                 end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m)
                 if end >= 0:
