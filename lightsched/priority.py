@@ -35,7 +35,7 @@ def aligned_empty(shape: int | tuple[int, ...], dtype: object = np.float64) -> n
     32, so a 64-byte row (a packed light, an object record) would straddle two lines and
     every row read at random (a candidate list's lights, a spot's hits) would miss twice."""
     dt = np.dtype(dtype)
-    size = int(np.prod(shape)) * dt.itemsize
+    size = math.prod((shape,) if isinstance(shape, int) else shape) * dt.itemsize
     buf = np.empty(size + CACHE_LINE, np.uint8)
     at = -buf.ctypes.data % CACHE_LINE
     return buf[at:at + size].view(dt).reshape(shape)
@@ -106,10 +106,10 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     cams = slice(None) if camera_term else slice(0)
     cam_columns = (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
                    frames.focus[cams])
-    n = len(lights.id)
+    # One buffer for both: rows of 64 bytes, so light_f starts on a cache line too.
+    out = aligned_empty((2, len(lights.id), 8))
     return _pack(light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
-                 np.zeros(3) if origin is None else origin,
-                 (aligned_empty((n, 8)), aligned_empty((n, 8))))
+                 np.zeros(3) if origin is None else origin, (out[0], out[1]))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
