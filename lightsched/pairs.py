@@ -751,8 +751,6 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     hot, lf = lights
     o_seg, o_p, o_j = out
     model = int(params[0])
-    w_obj = params[1]
-    w_int = params[2]
     n = c_seg.shape[0]
     n_dir = dir_rows.shape[0]
     # candidate_run reads whole 8-word rows.
@@ -776,18 +774,8 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
                 if end >= 0:
                     a = b
                     m = end
-            for t in range(a, b):
-                j = np.int64(c_j[t])
-                if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
-                    continue
-                d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
-                if d2 <= hot[j, 3] * hot[j, 3]:
-                    typ = (np.int64(hot[j, 5]) >> 3) & 3
-                    hit, p = _pair_p(hot, lf, j, typ, o, d2, box, model, w_obj, w_int)
-                    if hit:
-                        o_p[m] = p
-                        o_j[m] = j
-                        m += 1
+            m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, (o_p, o_j), m,
+                                  params)
             for d in range(n_dir):
                 j = dir_rows[d]
                 if ob & np.int64(hot[j, 4]) != 0:
@@ -796,6 +784,31 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
                     m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
     return room
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
+    """candidate_pairs' rule, one candidate at a time: of object row o (record o of box,
+    mask bits ob) and the candidate light rows c_j[a:b], the pairs of lights that compete with
+    a mask bit of the object's, in range, then _pair_p (cone, P of the model), appended
+    from m to out = (P, light row); returns the new end. simd.candidate_run does the same
+    eight at a time (tests/test_simd.py holds one against the other)."""
+    hot, lf = lights
+    o_p, o_j = out
+    model = int(params[0])
+    for t in range(a, b):
+        j = np.int64(c_j[t])
+        if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
+            continue
+        d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
+        if d2 <= hot[j, 3] * hot[j, 3]:
+            typ = (np.int64(hot[j, 5]) >> 3) & 3
+            hit, p = _pair_p(hot, lf, j, typ, o, d2, box, model, params[1], params[2])
+            if hit:
+                o_p[m] = p
+                o_j[m] = j
+                m += 1
+    return m
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -18,7 +18,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import _finish_hits, _pair_p, visible_objects
+from lightsched.pairs import _finish_hits, visible_objects
+from lightsched.pairs import scalar_candidates as pairs_scalar
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
 from lightsched.scene import POINT, SPOT
 
@@ -279,22 +280,10 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
 
 @nb.njit(nogil=True, error_model="numpy")
 def scalar_candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
-    """The scalar loop of pairs.candidate_pairs for one object under the contribution
-    model: a competing light with a mask bit of the object's, in range, then _pair_p."""
-    ob = np.int64(box.view(np.int64)[o, 6])
-    for t in range(a, b):
-        j = np.int64(c_j[t])
-        if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
-            continue
-        d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
-        if d2 <= hot[j, 3] * hot[j, 3]:
-            hit, p = _pair_p(hot, lf, j, (np.int64(hot[j, 5]) >> 3) & 3, o, d2, box,
-                             MODEL_CONTRIBUTION, 0.0, 0.0)
-            if hit:
-                out_p[m] = p
-                out_j[m] = j
-                m += 1
-    return m
+    """pairs.scalar_candidates (candidate_pairs' scalar loop) for one object under the
+    contribution model, with candidate_run's arguments."""
+    return pairs_scalar(box, np.int64(box.view(np.int64)[o, 6]), o, (hot, lf), compete, c_j,
+                        a, b, (out_p, out_j), m, np.array([MODEL_CONTRIBUTION, 0.0, 0.0]))
 
 
 @st.composite
