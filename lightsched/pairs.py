@@ -71,7 +71,15 @@ from .select import (
     topk_insert,
 )
 from .shadows import caster_bits, pick_slot_shadows
-from .simd import candidate_run, point_priority, point_run, prefetch_row, spot_priority
+from .simd import (
+    LANES,
+    candidate_run,
+    held_row,
+    point_priority,
+    point_run,
+    prefetch_row,
+    spot_priority,
+)
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
@@ -1050,11 +1058,21 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     # is read from the arrays. (numba.literally would re-type every call: ~1.5 s each.)
     k = len(k_static) if len(k_static) else s_id.shape[1]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    held_shadow = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0))
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
         for r in range(ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)):
             o = run[r]
+            if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= LANES:
+                # The common case in vector code: slots held in last frame's order.
+                cnt = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), lights, state,
+                               out, held_shadow)
+                if cnt >= 0:
+                    o_count[o] = cnt
+                    o_cand[o] = cnt
+                    o_fading[o] = False
+                    continue
             cnt = 0
             nbest = 0
             cand = 0

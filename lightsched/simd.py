@@ -48,7 +48,7 @@ from numba.core.codegen import get_host_cpu_features
 from numba.core.extending import intrinsic
 
 from .priority import R0
-from .scene import SPOT
+from .scene import ON, SPOT
 
 LANES = 8
 RECORD = 8  # float64 words per object record
@@ -552,6 +552,188 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
     return sig, codegen
 
 
+# The dtypes held_row reads and writes: heap (P, light row), lights (id, live), state
+# (slot ids, slot weights, slot states, selection), out (pairs.object_pass's nine) and
+# shadow (map index per light row, count), as the scheduler passes them.
+_HELD_TYPES = (
+    ((types.float64, 1), (types.int32, 1)),
+    ((types.int32, 1), (types.boolean, 1)),
+    ((types.int32, 2), (types.float64, 2), (types.uint8, 2), (types.int32, 2)),
+    ((types.int32, 2), (types.int32, 2), (types.float32, 2), (types.float32, 2),
+     (types.uint8, 2), (types.int32, 1), (types.int32, 1), (types.int8, 2),
+     (types.boolean, 1)),
+    ((types.int8, 1), None))
+
+
+def _held_exact(groups) -> bool:
+    """Whether the tuples held_row takes hold C-order arrays of the dtypes it reads."""
+    for group, want in zip(groups, _HELD_TYPES, strict=True):
+        for t, w in zip(group, want, strict=True):
+            if w is not None and not (isinstance(t, types.Array) and t.layout == "C"
+                                      and (t.dtype, t.ndim) == w):
+                return False
+    return True
+
+
+@intrinsic(prefer_literal=False)
+def held_row(typingctx, o, a, n, heap, lights, state, out, shadow):
+    """The slots of object row o when they are held in last frame's order, else -1 and
+    nothing written (the caller runs its scalar path, which gives every other case).
+    Held (fade.held_slots): its n pairs heap[a:a+n] (1 <= n <= 8) hold at most K = 8
+    competing lights, so all are selected, and last frame's slots were all on and hold
+    exactly them; then the new slots are those lights at weight 1 in output order (P
+    descending, ties to the lower id), which held_slots sorts from last frame's order.
+    Here that order must still hold under this frame's P (P moves little between frames,
+    so it mostly does): the outputs' rows are then last frame's ids with this frame's P
+    and light rows, -1 / 0 after them. Writes those rows, the selection (in pair order,
+    as the scalar path keeps it) and slot_shadow (the first ``shadow[1]`` slots in
+    output order whose light has a map: pick_slot_shadows when every weight is 1), and
+    returns the count. Arguments as pairs.object_pass has them (heap = (P, light row),
+    lights = (id, live) by light row, state, out) and shadow = (map index per light row,
+    how many slots may take one: 0 when no light has a map); K = 8 (the caller checks).
+    For arrays of other dtypes (none the scheduler passes) returns -1 at once.
+
+    Eight lanes, one pair each: the pairs loaded masked, each light's live flag and id
+    read at its row, and every rotation of the selected ids compared with the old slots,
+    which both checks that they are the same set and carries each pair's P and row to
+    its old slot; then one compare of each slot with the next checks the order, and each
+    output row is one vector store. (A sorting network of the eight lanes instead, 6
+    layers of compare-exchange on (P, id): ~40 ns an object more on this machine, the
+    chain of mask operations, against ~35 ns for the whole of this.)"""
+    groups = (heap, lights, state, out, shadow)
+    if not (all(isinstance(t, types.BaseTuple) for t in groups)
+            and tuple(len(g) for g in groups) == tuple(len(w) for w in _HELD_TYPES)
+            and isinstance(shadow[1], types.Integer)):
+        return None
+    sig = types.int64(types.int64, types.int64, types.int64, heap, lights, state, out,
+                      shadow)
+
+    def codegen(context, builder, signature, args):
+        if not _held_exact(signature.args[3:]):
+            return ir.Constant(_I64, -1)
+        b = builder
+
+        def data(k, i, elem):
+            ty = signature.args[k][i]
+            ary = context.make_array(ty)(context, b, b.extract_value(args[k], i))
+            return b.bitcast(ary.data, ir.PointerType(elem))
+
+        def row(k, i, elem):
+            """Row o (eight elements) of 2-D array i of tuple argument k."""
+            at = b.gep(data(k, i, elem), [b.mul(args[0], ir.Constant(_I64, LANES))])
+            return b.bitcast(at, ir.PointerType(ir.VectorType(elem, LANES)))
+
+        def masked_load(ptr, lanes, fill):
+            suffix, size = _element(fill.type)
+            fn = _declare(b, f"llvm.masked.load.v8{suffix}.p0", fill.type,
+                          [ptr.type, _I32, _VB, fill.type])
+            return b.call(fn, [ptr, ir.Constant(_I32, size), lanes, fill])
+
+        def at_rows(ptr, rows):
+            """ptr[rows[k]] in lane k, by scalar loads (every lane a valid row)."""
+            vec = ir.Constant(ir.VectorType(ptr.type.pointee, LANES), ir.Undefined)
+            for k in range(LANES):
+                r = b.extract_element(rows, ir.Constant(_I32, k))
+                vec = b.insert_element(vec, b.load(b.gep(ptr, [b.sext(r, _I64)])),
+                                       ir.Constant(_I32, k))
+            return vec
+
+        def splat(value, vty):
+            return ir.Constant(vty, [value] * LANES)
+
+        def turn(x, lanes):
+            return b.shuffle_vector(x, ir.Constant(x.type, ir.Undefined),
+                                    ir.Constant(_VI32, lanes))
+
+        def all_set(mask):
+            return b.icmp_unsigned("==", b.bitcast(mask, _I8), ir.Constant(_I8, 0xFF))
+
+        v8i8 = ir.VectorType(_I8, LANES)
+        v8f32 = ir.VectorType(ir.FloatType(), LANES)
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
+        a_, n_ = args[1], args[2]
+        lanes = b.icmp_signed("<", iota, _splat(b, n_, _VI64))
+        # Lanes past n read light row 0, which exists (the object has a pair).
+        p = masked_load(b.bitcast(b.gep(data(3, 0, _F64), [a_]), ir.PointerType(_VF)),
+                        lanes, splat(0.0, _VF))
+        rows = masked_load(b.bitcast(b.gep(data(3, 1, _I32), [a_]), ir.PointerType(_VI32)),
+                           lanes, splat(0, _VI32))
+        ids = at_rows(data(4, 0, _I32), rows)
+        live = b.and_(lanes, b.icmp_unsigned("!=", at_rows(data(4, 1, _I8), rows),
+                                             splat(0, v8i8)))
+        cand = b.call(popcount, [b.bitcast(live, _I8)])
+        old = b.load(row(5, 0, _I32), align=4)
+        has_old = b.icmp_signed(">=", old, splat(0, _VI32))
+        all_on = all_set(b.or_(b.not_(has_old), b.icmp_unsigned(
+            "==", b.load(row(5, 2, _I8), align=1), splat(ON, v8i8))))
+        # Light ids are not negative, so -2 matches no old slot.
+        sel = b.select(live, ids, splat(-2, _VI32))
+        found = b.not_(has_old)
+        old_p, old_rows = p, rows
+        for r in range(LANES):
+            by = [(i + r) % LANES for i in range(LANES)]
+            same = b.icmp_signed("==", old, turn(sel, by))
+            found = b.or_(found, same)
+            old_p = b.select(same, turn(p, by), old_p)
+            old_rows = b.select(same, turn(rows, by), old_rows)
+        # The same number of lights, each old one selected, ids unique: the same set.
+        held = b.and_(b.and_(all_on, all_set(found)),
+                      b.icmp_unsigned("==", b.call(popcount, [b.bitcast(has_old, _I8)]), cand))
+        # Still in output order: each filled slot ranks before the next (the last
+        # filled one and the empty ones pass).
+        nxt = [(i + 1) % LANES for i in range(LANES)]
+        next_p, next_id = turn(old_p, nxt), turn(old, nxt)
+        ranks = b.or_(b.fcmp_ordered(">", old_p, next_p), b.and_(
+            b.fcmp_ordered("==", old_p, next_p), b.icmp_signed("<", old, next_id)))
+        last = b.or_(b.icmp_signed("<", next_id, splat(0, _VI32)),
+                     ir.Constant(_VB, [0] * (LANES - 1) + [1]))
+        ordered = all_set(b.or_(b.or_(ranks, last), b.not_(has_old)))
+        result = cgutils.alloca_once_value(b, ir.Constant(_I64, -1))
+        with b.if_then(b.and_(held, ordered)):
+            first = has_old
+            b.store(old, row(6, 0, _I32), align=4)
+            b.store(b.select(first, old_rows, splat(-1, _VI32)), row(6, 1, _I32), align=4)
+            b.store(b.select(first, b.fptrunc(old_p, v8f32), splat(0.0, v8f32)),
+                    row(6, 2, ir.FloatType()), align=4)
+            b.store(b.select(first, splat(1.0, v8f32), splat(0.0, v8f32)),
+                    row(6, 3, ir.FloatType()), align=4)
+            b.store(b.select(first, splat(ON, v8i8), splat(0, v8i8)), row(6, 4, _I8), align=1)
+            b.store(b.select(first, splat(1.0, _VF), splat(0.0, _VF)), row(5, 1, _F64),
+                    align=8)
+            # slot_shadow: -1, then the first q slots whose light has a map (a slot's
+            # rank among those is the count of such slots before it).
+            q = b.extract_value(args[7], 1)
+            map_slot = cgutils.alloca_once_value(b, splat(-1, v8i8))
+            with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
+                maps = at_rows(data(7, 0, _I8), old_rows)
+                has = b.and_(first, b.icmp_signed(">=", maps, splat(0, v8i8)))
+                before = b.and_(_splat(b, b.bitcast(has, _I8), v8i8),
+                                ir.Constant(v8i8, [(1 << i) - 1 for i in range(LANES)]))
+                ctpop = _declare(b, "llvm.ctpop.v8i8", v8i8, [v8i8])
+                rank = b.zext(b.call(ctpop, [before]), _VI64)
+                q64 = context.cast(b, q, signature.args[7][1], types.int64)
+                keep = b.and_(has, b.icmp_signed("<", rank, _splat(b, q64, _VI64)))
+                b.store(b.select(keep, maps, splat(-1, v8i8)), map_slot)
+            b.store(b.load(map_slot), row(6, 7, _I8), align=1)
+            # The selection in pair order, -1 after it.
+            sel_ptr = row(5, 3, _I32)
+            if PACK_IN_REGISTER:
+                packed = b.call(_declare(b, "llvm.x86.avx512.mask.compress.v8i32", _VI32,
+                                         [_VI32, _VI32, _VB]),
+                                [sel, splat(-1, _VI32), live])
+                b.store(packed, sel_ptr, align=4)
+            else:
+                b.store(splat(-1, _VI32), sel_ptr, align=4)
+                b.call(_declare(b, "llvm.masked.compressstore.v8i32", ir.VoidType(),
+                                [_VI32, ir.PointerType(_I32), _VB]),
+                       [sel, b.bitcast(sel_ptr, ir.PointerType(_I32)), live])
+            b.store(b.zext(cand, _I64), result)
+        return b.load(result)
+
+    return sig, codegen
+
+
 @intrinsic(prefer_literal=False)
 def prefetch_row(typingctx, table, row):
     """Asks the cache for the start of ``table[row]`` (a C-order 2-D array) without waiting
@@ -578,5 +760,5 @@ def prefetch_row(typingctx, table, row):
     return sig, codegen
 
 
-__all__ = ["LANES", "PACK_IN_REGISTER", "candidate_run", "point_priority", "point_run",
-           "prefetch_row", "spot_priority", "target_features"]
+__all__ = ["LANES", "PACK_IN_REGISTER", "candidate_run", "held_row", "point_priority",
+           "point_run", "prefetch_row", "spot_priority", "target_features"]

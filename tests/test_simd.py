@@ -10,6 +10,8 @@ they append."""
 
 from __future__ import annotations
 
+import copy
+
 import numba as nb
 import numpy as np
 import pytest
@@ -18,10 +20,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import _finish_hits, visible_objects
+from lightsched.pairs import _finish_hits, object_pass, visible_objects
 from lightsched.pairs import scalar_candidates as pairs_scalar
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
-from lightsched.scene import POINT, SPOT
+from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
 
 finite = {"allow_nan": False, "allow_infinity": False}
 SENTINEL_ROW = -7
@@ -81,6 +83,10 @@ def _compiled(in_register: bool):
         def candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
             return simd.candidate_run(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m)
 
+        @nb.njit(nogil=True, error_model="numpy")
+        def held(o, a, n, heap, lights, state, out, shadow):
+            return simd.held_row(o, a, n, heap, lights, state, out, shadow)
+
         box = np.zeros((1, 8))
         candidates(box, 0, box, box, np.ones(1, np.bool_), np.zeros(1, np.int32), 0, 1,
                    np.zeros(1), np.zeros(1, np.int32), 0)
@@ -89,9 +95,111 @@ def _compiled(in_register: bool):
                    np.zeros(1), 0)
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
-        return run, hits, spot, candidates
+        case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
+        held(0, 0, 1, case[2][1], case[3], case[4], case[5], case[7])
+        return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
+
+
+HELD_KINDS = ("held", "reordered", "fading", "other", "reset", "hidden")
+
+
+def held_case(rng, kinds, n_l, max_shadowed, ties):
+    """pairs.object_pass's arguments (K = 8) for one object of each kind: "held" (last
+    frame's slots all on, holding its competing lights in output order under this frame's
+    P), "reordered" (the same with two neighbouring slots swapped), "fading" (held, one
+    slot fading in), "other" (random slots and states), "reset" (step 3), "hidden" (not
+    visible); each with 0-12 pairs of n_l lights (some not live), P from a few values
+    (``ties``) or continuous, maps on some lights."""
+    k = simd.LANES
+    n = len(kinds)
+    ids = rng.permutation(n_l * 3)[:n_l].astype(np.int32)
+    live = rng.uniform(size=n_l) < 0.85
+    shadow_of_row = rng.choice(np.array([-1, -1, 0, 1, 2, 3], np.int8), n_l)
+    seg = np.zeros((n, 2), np.int64)
+    heap_p, heap_j = [rng.uniform(-5, 5, 3)], [rng.integers(0, n_l, 3)]
+    s_id = np.full((n, k), -1, np.int32)
+    s_w = np.zeros((n, k))
+    s_st = np.zeros((n, k), np.uint8)
+    s_sel = np.full((n, k), -1, np.int32)
+    for o, kind in enumerate(kinds):
+        m = int(rng.integers(0, 13))
+        rows = rng.permutation(n_l)[:m].astype(np.int32)
+        p = rng.choice([-1.0, 0.0, 2.0, 2.5], rows.size) if ties else rng.uniform(-1, 9, rows.size)
+        seg[o] = (sum(x.size for x in heap_p), rows.size)
+        heap_p.append(p)
+        heap_j.append(rows)
+        gap = int(rng.integers(0, 3))
+        heap_p.append(rng.uniform(-5, 5, gap))
+        heap_j.append(rng.integers(0, n_l, gap))
+        lit = [(-p[t], int(ids[rows[t]]), t) for t in range(rows.size) if live[rows[t]]]
+        if kind == "other":
+            old = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
+            s_id[o, :old.size] = old
+            s_st[o, :old.size] = rng.choice([ON, ON, FADING_IN, FADING_OUT], old.size)
+            s_w[o, :old.size] = np.where(s_st[o, :old.size] == ON, 1.0,
+                                         rng.uniform(0.1, 0.9, old.size))
+            sel = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
+        else:
+            old = np.array([lid for _, lid, _ in sorted(lit)[:k]], np.int32)
+            if kind == "reordered" and old.size >= 2:
+                t = int(rng.integers(0, old.size - 1))
+                old[[t, t + 1]] = old[[t + 1, t]]
+            s_id[o, :old.size] = old
+            s_st[o, :old.size] = ON
+            s_w[o, :old.size] = 1.0
+            if kind == "fading" and old.size:
+                t = int(rng.integers(0, old.size))
+                s_st[o, t] = FADING_IN
+                s_w[o, t] = 0.5
+            sel = rng.permutation(old)
+        s_sel[o, :sel.size] = sel
+    visible = np.array([kind != "hidden" for kind in kinds])
+    reset = np.array([kind == "reset" for kind in kinds])
+    out = (np.full((n, k), -9, np.int32), np.full((n, k), -9, np.int32),
+           np.full((n, k), -9.0, np.float32), np.full((n, k), -9.0, np.float32),
+           np.full((n, k), 9, np.uint8), np.full(n, -9, np.int32), np.full(n, -9, np.int32),
+           np.full((n, k), -9, np.int8), np.ones(n, np.bool_))
+    params = np.array([0.1, 0.05, 0.25, 0.25, 0.2, 0.2])
+    heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
+    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), (ids, live),
+            (s_id, s_w, s_st, s_sel), out, params, (shadow_of_row, np.int64(max_shadowed)),
+            (0,) * k)
+
+
+def check_held(case, kinds, packings):
+    """object_pass (held objects through held_row) == object_pass on its scalar path (the
+    heap's P as a strided view, which held_row does not take) in every output and state,
+    bit for bit; and held_row alone, for each packing, gives each object's row of them
+    or -1 with nothing written, and takes every "held" object of 1-8 pairs."""
+    run, objs, (seg, heap), lights, state, out, params, shadow, k_static = case
+    strided = np.zeros(2 * heap[0].size)[::2]
+    strided[:] = heap[0]
+    want = copy.deepcopy((state, out))
+    object_pass(run, objs, (seg, (strided, heap[1])), lights, *want, params, shadow, k_static)
+    got = copy.deepcopy((state, out))
+    object_pass(run, objs, (seg, heap), lights, *got, params, shadow, k_static)
+    for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
+        assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
+    q = np.int64(shadow[1] if (shadow[0] >= 0).any() and shadow[1] > 0 else 0)
+    for packing in packings:
+        for o, kind in enumerate(kinds):
+            if not objs[0][o] or objs[1][o] or not 1 <= seg[o, 1] <= simd.LANES:
+                continue
+            mine = copy.deepcopy((state, out))
+            cnt = HELD[packing](o, seg[o, 0], seg[o, 1], heap, lights, *mine,
+                                (shadow[0], q))
+            assert cnt >= 0 or kind != "held", (o, kind)
+            rows = [x[o] for x in mine[0] + mine[1][:5] + mine[1][7:8]]
+            if cnt < 0:
+                before = [x[o] for x in state + out[:5] + out[7:8]]
+                assert all(np.array_equal(a, b) for a, b in zip(rows, before, strict=True))
+                continue
+            assert cnt == want[1][5][o] == want[1][6][o] and not want[1][8][o], (o, packing)
+            wanted = [x[o] for x in want[0] + want[1][:5] + want[1][7:8]]
+            for a, b in zip(rows, wanted, strict=True):
+                assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), (o, kind, packing)
 
 
 # The register packing only where numba compiles for AVX-512 (it could not run elsewhere).
@@ -101,6 +209,7 @@ KERNELS = {packing: kernels[0] for packing, kernels in COMPILED.items()}
 HITS = {packing: kernels[1] for packing, kernels in COMPILED.items()}
 SPOTS = {packing: kernels[2] for packing, kernels in COMPILED.items()}
 CANDIDATES = {packing: kernels[3] for packing, kernels in COMPILED.items()}
+HELD = {packing: kernels[4] for packing, kernels in COMPILED.items()}
 
 
 @st.composite
@@ -399,6 +508,31 @@ def test_candidate_run_leaves_float32_records_to_the_scalar_loop():
     assert (out_j == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
 
 
+@examples(3.0)
+@given(kinds=st.lists(st.sampled_from(HELD_KINDS), min_size=1, max_size=12),
+       n_l=st.integers(1, 24), max_shadowed=st.integers(0, 3), ties=st.booleans(),
+       seed=st.integers(0, 2**32 - 1))
+def test_held_row_equals_the_scalar_path(kinds, n_l, max_shadowed, ties, seed):
+    """held_row inside object_pass and alone: the scalar path's outputs and state bit for
+    bit (check_held), on objects held in order, reordered, fading, of other slots, reset
+    and hidden, with ties of P and maps on some lights."""
+    case = held_case(np.random.default_rng(seed), kinds, n_l, max_shadowed, ties)
+    check_held(case, kinds, PACKINGS)
+
+
+def test_held_row_takes_the_held_objects_of_a_crowd():
+    """A few hundred objects of every kind around 40 lights: held_row takes every held
+    object (check_held), and the others go to the scalar path with the same result."""
+    rng = np.random.default_rng(23)
+    kinds = list(rng.choice(HELD_KINDS, 300))
+    case = held_case(rng, kinds, 40, 2, False)
+    check_held(case, kinds, PACKINGS)
+    held = [HELD[PACKINGS[-1]](o, case[2][0][o, 0], case[2][0][o, 1], case[2][1], case[3],
+                               *copy.deepcopy((case[4], case[5])), case[7]) >= 0
+            for o in range(len(kinds)) if 1 <= case[2][0][o, 1] <= simd.LANES]
+    assert 100 < sum(held) < len(held)
+
+
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
            "+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,-avx512f,-avx512vl")
 WITHOUT_AVX512 = """
@@ -443,6 +577,11 @@ for o in range(n):
     k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
     assert CANDIDATES[False](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+from test_simd import HELD, HELD_KINDS, check_held, held_case
+assert "zmm" not in "".join(HELD[False].inspect_asm().values())
+rng = np.random.default_rng(7)
+kinds = list(rng.choice(HELD_KINDS, 200))
+check_held(held_case(rng, kinds, 30, 2, False), kinds, [False])
 print("ok")
 """
 
@@ -450,7 +589,7 @@ print("ok")
 def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
     """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
     packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run and
-    candidate_run)."""
+    candidate_run) and the scalar path's slots (held_row, inside object_pass and alone)."""
     import os
     import subprocess
     import sys
