@@ -1058,19 +1058,20 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     # is read from the arrays. (numba.literally would re-type every call: ~1.5 s each.)
     k = len(k_static) if len(k_static) else s_id.shape[1]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
-    held_shadow = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0))
+    held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0), h,
+                  h_abs)
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
         for r in range(ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)):
             o = run[r]
-            if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= LANES:
+            if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
                 # The common case in vector code: slots held in last frame's order.
-                cnt = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), lights, state,
-                               out, held_shadow)
-                if cnt >= 0:
-                    o_count[o] = cnt
-                    o_cand[o] = cnt
+                cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), lights, state,
+                                out, held_rules)
+                if cand >= 0:
+                    o_count[o] = min(cand, k)
+                    o_cand[o] = cand
                     o_fading[o] = False
                     continue
             cnt = 0

@@ -554,7 +554,8 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
 
 # The dtypes held_row reads and writes: heap (P, light row), lights (id, live), state
 # (slot ids, slot weights, slot states, selection), out (pairs.object_pass's nine) and
-# shadow (map index per light row, count), as the scheduler passes them.
+# rules (map index per light row; the others are checked by kind), as the scheduler
+# passes them.
 _HELD_TYPES = (
     ((types.float64, 1), (types.int32, 1)),
     ((types.int32, 1), (types.boolean, 1)),
@@ -562,7 +563,7 @@ _HELD_TYPES = (
     ((types.int32, 2), (types.int32, 2), (types.float32, 2), (types.float32, 2),
      (types.uint8, 2), (types.int32, 1), (types.int32, 1), (types.int8, 2),
      (types.boolean, 1)),
-    ((types.int8, 1), None))
+    ((types.int8, 1), None, None, None))
 
 
 def _held_exact(groups) -> bool:
@@ -576,42 +577,55 @@ def _held_exact(groups) -> bool:
 
 
 @intrinsic(prefer_literal=False)
-def held_row(typingctx, o, a, n, heap, lights, state, out, shadow):
+def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     """The slots of object row o when they are held in last frame's order, else -1 and
     nothing written (the caller runs its scalar path, which gives every other case).
-    Held (fade.held_slots): its n pairs heap[a:a+n] (1 <= n <= 8) hold at most K = 8
-    competing lights, so all are selected, and last frame's slots were all on and hold
-    exactly them; then the new slots are those lights at weight 1 in output order (P
-    descending, ties to the lower id), which held_slots sorts from last frame's order.
-    Here that order must still hold under this frame's P (P moves little between frames,
-    so it mostly does): the outputs' rows are then last frame's ids with this frame's P
-    and light rows, -1 / 0 after them. Writes those rows, the selection (in pair order,
-    as the scalar path keeps it) and slot_shadow (the first ``shadow[1]`` slots in
-    output order whose light has a map: pick_slot_shadows when every weight is 1), and
-    returns the count. Arguments as pairs.object_pass has them (heap = (P, light row),
-    lights = (id, live) by light row, state, out) and shadow = (map index per light row,
-    how many slots may take one: 0 when no light has a map); K = 8 (the caller checks).
-    For arrays of other dtypes (none the scheduler passes) returns -1 at once.
+    Held (fade.held_slots): last frame's slots were all on and hold exactly this frame's
+    selection (DESIGN section 2, "Selection" and "Fade"); then the new slots are those
+    lights at weight 1 in output order (P descending, ties to the lower id), which
+    held_slots sorts from last frame's order. Here that order must still hold under this
+    frame's P (P moves little between frames, so it mostly does): the outputs' rows are
+    then last frame's ids with this frame's P and light rows, -1 / 0 after them.
 
-    Eight lanes, one pair each: the pairs loaded masked, each light's live flag and id
-    read at its row, and every rotation of the selected ids compared with the old slots,
-    which both checks that they are the same set and carries each pair's P and row to
-    its old slot; then one compare of each slot with the next checks the order, and each
-    output row is one vector store. (A sorting network of the eight lanes instead, 6
-    layers of compare-exchange on (P, id): ~40 ns an object more on this machine, the
-    chain of mask operations, against ~35 ns for the whole of this.)"""
-    groups = (heap, lights, state, out, shadow)
+    Two cases, by the object's n pairs heap[a:a+n]: 1 <= n <= 8, all its competing lights
+    selected, and 9 <= n <= 16 with more than K = 8 competing: the top K by the hysteresis
+    key (select.hysteresis_key against last frame's selection), which here must be the
+    old slots: each ranks, by key, before every other competing light, and they are in
+    order by key as well as by P (the selection's order, which the scalar path keeps).
+    Writes each output row, the slot weights, the selection (as the scalar path keeps it:
+    in pair order, or by key) and slot_shadow (the first ``rules[1]`` slots in output
+    order whose light has a map: pick_slot_shadows when every weight is 1), and returns
+    the number of competing lights (the count is that, at most K). Arguments as
+    pairs.object_pass has them (heap = (P, light row), lights = (id, live) by light row,
+    state, out) and rules = (map index per light row, how many slots may take one: 0
+    when no light has a map, h, hysteresis_abs); K = 8 (the caller checks). For arrays
+    of other dtypes or layouts (none the scheduler passes) returns -1 at once.
+
+    Eight lanes, one pair each (two vectors of them from 9 pairs): the pairs loaded
+    masked, each light's live flag and id read at its row, and every rotation of the
+    selected ids compared with the old slots, which both checks that they are the same
+    set and carries each pair's P, row and key to its old slot; one compare of each slot
+    with the next checks the order, and each output row is one vector store. (A sorting
+    network of the eight lanes instead, 6 layers of compare-exchange on (P, id): ~40 ns
+    an object more on this machine, the chain of mask operations, against ~35 ns for the
+    whole of the first case.)"""
+    groups = (heap, lights, state, out, rules)
     if not (all(isinstance(t, types.BaseTuple) for t in groups)
             and tuple(len(g) for g in groups) == tuple(len(w) for w in _HELD_TYPES)
-            and isinstance(shadow[1], types.Integer)):
+            and isinstance(rules[1], types.Integer)
+            and all(isinstance(t, types.Float) for t in rules[2:])):
         return None
     sig = types.int64(types.int64, types.int64, types.int64, heap, lights, state, out,
-                      shadow)
+                      rules)
 
     def codegen(context, builder, signature, args):
         if not _held_exact(signature.args[3:]):
             return ir.Constant(_I64, -1)
         b = builder
+        v8i8 = ir.VectorType(_I8, LANES)
+        v8f32 = ir.VectorType(ir.FloatType(), LANES)
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
 
         def data(k, i, elem):
             ty = signature.args[k][i]
@@ -641,57 +655,142 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, shadow):
         def splat(value, vty):
             return ir.Constant(vty, [value] * LANES)
 
-        def turn(x, lanes):
-            return b.shuffle_vector(x, ir.Constant(x.type, ir.Undefined),
-                                    ir.Constant(_VI32, lanes))
+        def turn(x, by):
+            """Lane i takes lane (i + by) % 8."""
+            return b.shuffle_vector(x, ir.Constant(x.type, ir.Undefined), ir.Constant(
+                _VI32, [(i + by) % LANES for i in range(LANES)]))
 
         def all_set(mask):
             return b.icmp_unsigned("==", b.bitcast(mask, _I8), ir.Constant(_I8, 0xFF))
 
-        v8i8 = ir.VectorType(_I8, LANES)
-        v8f32 = ir.VectorType(ir.FloatType(), LANES)
-        iota = ir.Constant(_VI64, list(range(LANES)))
-        popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
-        a_, n_ = args[1], args[2]
-        lanes = b.icmp_signed("<", iota, _splat(b, n_, _VI64))
-        # Lanes past n read light row 0, which exists (the object has a pair).
-        p = masked_load(b.bitcast(b.gep(data(3, 0, _F64), [a_]), ir.PointerType(_VF)),
-                        lanes, splat(0.0, _VF))
-        rows = masked_load(b.bitcast(b.gep(data(3, 1, _I32), [a_]), ir.PointerType(_VI32)),
-                           lanes, splat(0, _VI32))
-        ids = at_rows(data(4, 0, _I32), rows)
-        live = b.and_(lanes, b.icmp_unsigned("!=", at_rows(data(4, 1, _I8), rows),
-                                             splat(0, v8i8)))
-        cand = b.call(popcount, [b.bitcast(live, _I8)])
+        def count(mask):
+            return b.zext(b.call(popcount, [b.bitcast(mask, _I8)]), _I64)
+
+        def ranks(xp, xid, yp, yid):
+            """select.ranks_before per lane: higher, ties to the lower id."""
+            return b.or_(b.fcmp_ordered(">", xp, yp),
+                         b.and_(b.fcmp_ordered("==", xp, yp), b.icmp_signed("<", xid, yid)))
+
+        def pairs(start, lanes):
+            """(P, light row, id, live) of eight pairs from heap record ``start``;
+            ``lanes`` are pairs, the others read light row 0, which exists (the object
+            has a pair) and are not live."""
+            p = masked_load(b.bitcast(b.gep(data(3, 0, _F64), [start]), ir.PointerType(_VF)),
+                            lanes, splat(0.0, _VF))
+            rows = masked_load(b.bitcast(b.gep(data(3, 1, _I32), [start]),
+                                         ir.PointerType(_VI32)), lanes, splat(0, _VI32))
+            live = b.icmp_unsigned("!=", at_rows(data(4, 1, _I8), rows), splat(0, v8i8))
+            return p, rows, at_rows(data(4, 0, _I32), rows), b.and_(lanes, live)
+
         old = b.load(row(5, 0, _I32), align=4)
         has_old = b.icmp_signed(">=", old, splat(0, _VI32))
+        n_old = count(has_old)
         all_on = all_set(b.or_(b.not_(has_old), b.icmp_unsigned(
             "==", b.load(row(5, 2, _I8), align=1), splat(ON, v8i8))))
-        # Light ids are not negative, so -2 matches no old slot.
-        sel = b.select(live, ids, splat(-2, _VI32))
-        found = b.not_(has_old)
-        old_p, old_rows = p, rows
-        for r in range(LANES):
-            by = [(i + r) % LANES for i in range(LANES)]
-            same = b.icmp_signed("==", old, turn(sel, by))
-            found = b.or_(found, same)
-            old_p = b.select(same, turn(p, by), old_p)
-            old_rows = b.select(same, turn(rows, by), old_rows)
-        # The same number of lights, each old one selected, ids unique: the same set.
-        held = b.and_(b.and_(all_on, all_set(found)),
-                      b.icmp_unsigned("==", b.call(popcount, [b.bitcast(has_old, _I8)]), cand))
-        # Still in output order: each filled slot ranks before the next (the last
-        # filled one and the empty ones pass).
-        nxt = [(i + 1) % LANES for i in range(LANES)]
-        next_p, next_id = turn(old_p, nxt), turn(old, nxt)
-        ranks = b.or_(b.fcmp_ordered(">", old_p, next_p), b.and_(
-            b.fcmp_ordered("==", old_p, next_p), b.icmp_signed("<", old, next_id)))
-        last = b.or_(b.icmp_signed("<", next_id, splat(0, _VI32)),
-                     ir.Constant(_VB, [0] * (LANES - 1) + [1]))
-        ordered = all_set(b.or_(b.or_(ranks, last), b.not_(has_old)))
+
+        def match(halves):
+            """(every old slot's light among the halves' live pairs, and the fields of
+            the pair holding each old slot's light); halves = (ids of live pairs, -2
+            elsewhere: light ids are not negative; their fields)."""
+            found = b.not_(has_old)
+            at_old = list(halves[0][1])
+            for sel, fields in halves:
+                for r in range(LANES):
+                    same = b.icmp_signed("==", old, turn(sel, r))
+                    found = b.or_(found, same)
+                    at_old = [b.select(same, turn(f, r), x) for f, x in zip(fields, at_old,
+                                                                          strict=True)]
+            return all_set(found), at_old
+
+        def in_order(x):
+            """Each filled old slot ranks before the next by x (the last filled passes)."""
+            nx, nid = turn(x, 1), turn(old, 1)
+            last = b.or_(b.icmp_signed("<", nid, splat(0, _VI32)),
+                         ir.Constant(_VB, [0] * (LANES - 1) + [1]))
+            return all_set(b.or_(b.or_(ranks(x, old, nx, nid), last), b.not_(has_old)))
+
+        def store_selection(sel, live):
+            """The selection row: the live lanes' ids in lane order, -1 after them."""
+            sel_ptr = row(5, 3, _I32)
+            if PACK_IN_REGISTER:
+                packed = b.call(_declare(b, "llvm.x86.avx512.mask.compress.v8i32", _VI32,
+                                         [_VI32, _VI32, _VB]), [sel, splat(-1, _VI32), live])
+                b.store(packed, sel_ptr, align=4)
+            else:
+                b.store(splat(-1, _VI32), sel_ptr, align=4)
+                b.call(_declare(b, "llvm.masked.compressstore.v8i32", ir.VoidType(),
+                                [_VI32, ir.PointerType(_I32), _VB]),
+                       [sel, b.bitcast(sel_ptr, ir.PointerType(_I32)), live])
+
+        a_, n_ = args[1], args[2]
+        rules = args[7]
+        ok_slot = cgutils.alloca_once_value(b, ir.Constant(ir.IntType(1), 0))
+        cand_slot = cgutils.alloca_once_value(b, ir.Constant(_I64, 0))
+        p_slot = cgutils.alloca_once_value(b, splat(0.0, _VF))
+        rows_slot = cgutils.alloca_once_value(b, splat(0, _VI32))
+        with b.if_else(b.icmp_signed(">", n_, ir.Constant(_I64, LANES))) as (wide, narrow):
+            with narrow:
+                p, rows, ids, live = pairs(a_, b.icmp_signed("<", iota, _splat(b, n_, _VI64)))
+                cand = count(live)
+                sel = b.select(live, ids, splat(-2, _VI32))
+                found, (old_p, old_rows) = match([(sel, (p, rows))])
+                ok = b.and_(b.and_(all_on, found), b.icmp_unsigned("==", n_old, cand))
+                ok = b.and_(ok, in_order(old_p))
+                for slot, value in ((ok_slot, ok), (cand_slot, cand), (p_slot, old_p),
+                                    (rows_slot, old_rows)):
+                    b.store(value, slot)
+                with b.if_then(ok):
+                    store_selection(sel, live)
+            with wide:
+                p, rows, ids, live = pairs(a_, ir.Constant(_VB, [1] * LANES))
+                rest = _splat(b, b.sub(n_, ir.Constant(_I64, LANES)), _VI64)
+                p2, rows2, ids2, live2 = pairs(b.add(a_, ir.Constant(_I64, LANES)),
+                                               b.icmp_signed("<", iota, rest))
+                cand = b.add(count(live), count(live2))
+                prev = b.load(row(5, 3, _I32), align=4)
+                h, h_abs = b.extract_value(rules, 2), b.extract_value(rules, 3)
+                fabs = _declare(b, "llvm.fabs.v8f64", _VF, [_VF])
+
+                def key(p, ids):
+                    """select.hysteresis_key: P + h|P| + h_abs for last frame's selection."""
+                    was = ir.Constant(_VB, [0] * LANES)
+                    for r in range(LANES):
+                        was = b.or_(was, b.icmp_signed("==", ids, turn(prev, r)))
+                    raised = b.fmul(_splat(b, h, _VF), b.call(fabs, [p]))
+                    raised = b.fadd(b.fadd(p, raised), _splat(b, h_abs, _VF))
+                    return b.select(was, raised, p)
+
+                keys, keys2 = key(p, ids), key(p2, ids2)
+                sel = b.select(live, ids, splat(-2, _VI32))
+                sel2 = b.select(live2, ids2, splat(-2, _VI32))
+                found, (old_p, old_rows, old_key) = match([(sel, (p, rows, keys)),
+                                                           (sel2, (p2, rows2, keys2))])
+                last_key = _splat(b, b.extract_element(old_key, ir.Constant(_I32, 7)), _VF)
+                last_id = _splat(b, b.extract_element(old, ir.Constant(_I32, 7)), _VI32)
+
+                def after(sel, keys):
+                    """Every live pair not in an old slot ranks after the last old slot."""
+                    mine = ir.Constant(_VB, [0] * LANES)
+                    for r in range(LANES):
+                        mine = b.or_(mine, b.icmp_signed("==", sel, turn(old, r)))
+                    other = b.and_(b.icmp_signed(">=", sel, splat(0, _VI32)), b.not_(mine))
+                    return all_set(b.or_(b.not_(other), ranks(last_key, last_id, keys, sel)))
+
+                ok = b.and_(b.and_(all_on, found),
+                            b.icmp_unsigned("==", n_old, ir.Constant(_I64, LANES)))
+                ok = b.and_(ok, b.icmp_signed(">", cand, ir.Constant(_I64, LANES)))
+                for more in (in_order(old_p), in_order(old_key), after(sel, keys),
+                             after(sel2, keys2)):
+                    ok = b.and_(ok, more)
+                for slot, value in ((ok_slot, ok), (cand_slot, cand), (p_slot, old_p),
+                                    (rows_slot, old_rows)):
+                    b.store(value, slot)
+                with b.if_then(ok):
+                    b.store(old, row(5, 3, _I32), align=4)
         result = cgutils.alloca_once_value(b, ir.Constant(_I64, -1))
-        with b.if_then(b.and_(held, ordered)):
+        with b.if_then(b.load(ok_slot)):
             first = has_old
+            old_p, old_rows = b.load(p_slot), b.load(rows_slot)
             b.store(old, row(6, 0, _I32), align=4)
             b.store(b.select(first, old_rows, splat(-1, _VI32)), row(6, 1, _I32), align=4)
             b.store(b.select(first, b.fptrunc(old_p, v8f32), splat(0.0, v8f32)),
@@ -703,7 +802,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, shadow):
                     align=8)
             # slot_shadow: -1, then the first q slots whose light has a map (a slot's
             # rank among those is the count of such slots before it).
-            q = b.extract_value(args[7], 1)
+            q = b.extract_value(rules, 1)
             map_slot = cgutils.alloca_once_value(b, splat(-1, v8i8))
             with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
                 maps = at_rows(data(7, 0, _I8), old_rows)
@@ -716,19 +815,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, shadow):
                 keep = b.and_(has, b.icmp_signed("<", rank, _splat(b, q64, _VI64)))
                 b.store(b.select(keep, maps, splat(-1, v8i8)), map_slot)
             b.store(b.load(map_slot), row(6, 7, _I8), align=1)
-            # The selection in pair order, -1 after it.
-            sel_ptr = row(5, 3, _I32)
-            if PACK_IN_REGISTER:
-                packed = b.call(_declare(b, "llvm.x86.avx512.mask.compress.v8i32", _VI32,
-                                         [_VI32, _VI32, _VB]),
-                                [sel, splat(-1, _VI32), live])
-                b.store(packed, sel_ptr, align=4)
-            else:
-                b.store(splat(-1, _VI32), sel_ptr, align=4)
-                b.call(_declare(b, "llvm.masked.compressstore.v8i32", ir.VoidType(),
-                                [_VI32, ir.PointerType(_I32), _VB]),
-                       [sel, b.bitcast(sel_ptr, ir.PointerType(_I32)), live])
-            b.store(b.zext(cand, _I64), result)
+            b.store(b.load(cand_slot), result)
         return b.load(result)
 
     return sig, codegen

@@ -96,65 +96,74 @@ def _compiled(in_register: bool):
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
-        held(0, 0, 1, case[2][1], case[3], case[4], case[5], case[7])
+        held(0, 0, 1, case[2][1], case[3], case[4], case[5], (case[7][0], np.int64(0), 0.1,
+                                                              0.05))
         return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
 
 
-HELD_KINDS = ("held", "reordered", "fading", "other", "reset", "hidden")
+HELD_KINDS = ("held", "reordered", "outranked", "fading", "other", "reset", "hidden")
 
 
 def held_case(rng, kinds, n_l, max_shadowed, ties):
     """pairs.object_pass's arguments (K = 8) for one object of each kind: "held" (last
     frame's slots all on, holding its competing lights in output order under this frame's
-    P), "reordered" (the same with two neighbouring slots swapped), "fading" (held, one
-    slot fading in), "other" (random slots and states), "reset" (step 3), "hidden" (not
-    visible); each with 0-12 pairs of n_l lights (some not live), P from a few values
-    (``ties``) or continuous, maps on some lights."""
+    P), "reordered" (the same with two neighbouring slots swapped), "outranked" (held, but
+    by the last K of its lights by P: others may rank first even against their
+    hysteresis), "fading" (held, one slot fading in), "other" (random slots and states),
+    "reset" (step 3), "hidden" (not visible); each with 0-18 pairs of n_l lights (some
+    not live), P from a few values (``ties``) or continuous, maps on some lights."""
     k = simd.LANES
-    n = len(kinds)
     ids = rng.permutation(n_l * 3)[:n_l].astype(np.int32)
     live = rng.uniform(size=n_l) < 0.85
+    objects = []
+    for kind in kinds:
+        rows = rng.permutation(n_l)[:int(rng.integers(0, 19))].astype(np.int32)
+        p = rng.choice([-1.0, 0.0, 2.0, 2.5], rows.size) if ties else rng.uniform(-1, 9, rows.size)
+        lit = sorted((-p[t], int(ids[rows[t]])) for t in range(rows.size) if live[rows[t]])
+        if kind == "other":
+            old = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
+            states = rng.choice([ON, ON, FADING_IN, FADING_OUT], old.size)
+            sel = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
+        else:
+            old = np.array([lid for _, lid in (lit[-k:] if kind == "outranked" else lit[:k])],
+                           np.int32)
+            if kind == "reordered" and old.size >= 2:
+                t = int(rng.integers(0, old.size - 1))
+                old[[t, t + 1]] = old[[t + 1, t]]
+            states = np.full(old.size, ON)
+            if kind == "fading" and old.size:
+                states[int(rng.integers(0, old.size))] = FADING_IN
+            sel = rng.permutation(old)
+        objects.append((kind, p, rows, old, states, sel))
     shadow_of_row = rng.choice(np.array([-1, -1, 0, 1, 2, 3], np.int8), n_l)
+    return pass_arguments(rng, objects, (ids, live), shadow_of_row, max_shadowed)
+
+
+def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed):
+    """pairs.object_pass's arguments (K = 8) for objects = [(kind, P and light rows of
+    its pairs, last frame's slot ids and states, last frame's selection)] (kinds "reset"
+    and "hidden" as held_case's), with a few pairs of no object between them."""
+    k = simd.LANES
+    n = len(objects)
+    n_l = lights[0].size
     seg = np.zeros((n, 2), np.int64)
     heap_p, heap_j = [rng.uniform(-5, 5, 3)], [rng.integers(0, n_l, 3)]
     s_id = np.full((n, k), -1, np.int32)
     s_w = np.zeros((n, k))
     s_st = np.zeros((n, k), np.uint8)
     s_sel = np.full((n, k), -1, np.int32)
-    for o, kind in enumerate(kinds):
-        m = int(rng.integers(0, 13))
-        rows = rng.permutation(n_l)[:m].astype(np.int32)
-        p = rng.choice([-1.0, 0.0, 2.0, 2.5], rows.size) if ties else rng.uniform(-1, 9, rows.size)
+    for o, (_, p, rows, old, states, sel) in enumerate(objects):
         seg[o] = (sum(x.size for x in heap_p), rows.size)
-        heap_p.append(p)
-        heap_j.append(rows)
         gap = int(rng.integers(0, 3))
-        heap_p.append(rng.uniform(-5, 5, gap))
-        heap_j.append(rng.integers(0, n_l, gap))
-        lit = [(-p[t], int(ids[rows[t]]), t) for t in range(rows.size) if live[rows[t]]]
-        if kind == "other":
-            old = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
-            s_id[o, :old.size] = old
-            s_st[o, :old.size] = rng.choice([ON, ON, FADING_IN, FADING_OUT], old.size)
-            s_w[o, :old.size] = np.where(s_st[o, :old.size] == ON, 1.0,
-                                         rng.uniform(0.1, 0.9, old.size))
-            sel = rng.permutation(ids)[:int(rng.integers(0, k + 1))]
-        else:
-            old = np.array([lid for _, lid, _ in sorted(lit)[:k]], np.int32)
-            if kind == "reordered" and old.size >= 2:
-                t = int(rng.integers(0, old.size - 1))
-                old[[t, t + 1]] = old[[t + 1, t]]
-            s_id[o, :old.size] = old
-            s_st[o, :old.size] = ON
-            s_w[o, :old.size] = 1.0
-            if kind == "fading" and old.size:
-                t = int(rng.integers(0, old.size))
-                s_st[o, t] = FADING_IN
-                s_w[o, t] = 0.5
-            sel = rng.permutation(old)
+        heap_p += [p, rng.uniform(-5, 5, gap)]
+        heap_j += [rows, rng.integers(0, n_l, gap)]
+        s_id[o, :old.size] = old
+        s_st[o, :old.size] = states
+        s_w[o, :old.size] = np.where(states == ON, 1.0, rng.uniform(0.1, 0.9, old.size))
         s_sel[o, :sel.size] = sel
+    kinds = [obj[0] for obj in objects]
     visible = np.array([kind != "hidden" for kind in kinds])
     reset = np.array([kind == "reset" for kind in kinds])
     out = (np.full((n, k), -9, np.int32), np.full((n, k), -9, np.int32),
@@ -163,7 +172,7 @@ def held_case(rng, kinds, n_l, max_shadowed, ties):
            np.full((n, k), -9, np.int8), np.ones(n, np.bool_))
     params = np.array([0.1, 0.05, 0.25, 0.25, 0.2, 0.2])
     heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
-    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), (ids, live),
+    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), lights,
             (s_id, s_w, s_st, s_sel), out, params, (shadow_of_row, np.int64(max_shadowed)),
             (0,) * k)
 
@@ -172,7 +181,8 @@ def check_held(case, kinds, packings):
     """object_pass (held objects through held_row) == object_pass on its scalar path (the
     heap's P as a strided view, which held_row does not take) in every output and state,
     bit for bit; and held_row alone, for each packing, gives each object's row of them
-    or -1 with nothing written, and takes every "held" object of 1-8 pairs."""
+    or -1 with nothing written, and takes every "held" object of 1-8 pairs, or of 9-16
+    pairs with more than 8 competing."""
     run, objs, (seg, heap), lights, state, out, params, shadow, k_static = case
     strided = np.zeros(2 * heap[0].size)[::2]
     strided[:] = heap[0]
@@ -183,20 +193,23 @@ def check_held(case, kinds, packings):
     for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
     q = np.int64(shadow[1] if (shadow[0] >= 0).any() and shadow[1] > 0 else 0)
+    rules = (shadow[0], q, params[0], params[1])
     for packing in packings:
         for o, kind in enumerate(kinds):
-            if not objs[0][o] or objs[1][o] or not 1 <= seg[o, 1] <= simd.LANES:
+            n = seg[o, 1]
+            if not objs[0][o] or objs[1][o] or not 1 <= n <= 2 * simd.LANES:
                 continue
             mine = copy.deepcopy((state, out))
-            cnt = HELD[packing](o, seg[o, 0], seg[o, 1], heap, lights, *mine,
-                                (shadow[0], q))
-            assert cnt >= 0 or kind != "held", (o, kind)
+            cand = HELD[packing](o, seg[o, 0], n, heap, lights, *mine, rules)
+            wide = want[1][6][o] > simd.LANES
+            assert cand >= 0 or kind != "held" or (n > simd.LANES) != wide, (o, kind)
             rows = [x[o] for x in mine[0] + mine[1][:5] + mine[1][7:8]]
-            if cnt < 0:
+            if cand < 0:
                 before = [x[o] for x in state + out[:5] + out[7:8]]
                 assert all(np.array_equal(a, b) for a, b in zip(rows, before, strict=True))
                 continue
-            assert cnt == want[1][5][o] == want[1][6][o] and not want[1][8][o], (o, packing)
+            assert cand == want[1][6][o] and min(cand, simd.LANES) == want[1][5][o]
+            assert not want[1][8][o], (o, packing)
             wanted = [x[o] for x in want[0] + want[1][:5] + want[1][7:8]]
             for a, b in zip(rows, wanted, strict=True):
                 assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), (o, kind, packing)
@@ -527,10 +540,40 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     kinds = list(rng.choice(HELD_KINDS, 300))
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
-    held = [HELD[PACKINGS[-1]](o, case[2][0][o, 0], case[2][0][o, 1], case[2][1], case[3],
-                               *copy.deepcopy((case[4], case[5])), case[7]) >= 0
-            for o in range(len(kinds)) if 1 <= case[2][0][o, 1] <= simd.LANES]
-    assert 100 < sum(held) < len(held)
+    seg = case[2][0]
+    rules = (case[7][0], np.int64(2), case[6][0], case[6][1])
+    taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], case[3],
+                                *copy.deepcopy((case[4], case[5])), rules)
+             for o in range(len(kinds)) if 1 <= seg[o, 1] <= 2 * simd.LANES]
+    held = [cand for cand in taken if cand >= 0]
+    assert 70 < len(held) < len(taken)
+    assert sum(cand > simd.LANES for cand in held) > 20
+
+
+def test_held_row_keeps_the_selection_by_key():
+    """Two old slots whose P differ by an ulp and whose hysteresis keys round to one
+    value, the lower P on the lower id: output order (by P) keeps them as they were, the
+    selection (by key, ties to the lower id) swaps them, so the selection row is not last
+    frame's slots and held_row leaves the object to the scalar path."""
+    h, h_abs = 0.1, 0.05
+    p1 = 1.9
+    while True:
+        p2 = np.nextafter(p1, 0.0)
+        if p1 + h * abs(p1) + h_abs == p2 + h * abs(p2) + h_abs:
+            break
+        p1 = np.nextafter(p1, 2.0)
+    ids = np.array([10, 11, 12, 13, 14, 15, 21, 20, 30], np.int32)
+    p = np.array([6.0, 5.5, 5.0, 4.5, 4.0, 3.5, p1, p2, 0.5])
+    rows = np.arange(9, dtype=np.int32)
+    old = ids[:8].copy()
+    objects = [("held", p, rows, old, np.full(8, ON), old[::-1].copy())]
+    rng = np.random.default_rng(3)
+    case = pass_arguments(rng, objects, (ids, np.ones(9, np.bool_)),
+                          np.full(9, -1, np.int8), 0)
+    check_held(case, ["keys tie"], PACKINGS)
+    assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], case[3],
+                              *copy.deepcopy((case[4], case[5])),
+                              (case[7][0], np.int64(0), h, h_abs)) == -1
 
 
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
