@@ -1059,7 +1059,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     k = len(k_static) if len(k_static) else s_id.shape[1]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0), h,
-                  h_abs)
+                  h_abs, inc, fade_in)
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
@@ -1072,7 +1072,6 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                 if cand >= 0:
                     o_count[o] = min(cand, k)
                     o_cand[o] = cand
-                    o_fading[o] = False
                     continue
             cnt = 0
             nbest = 0

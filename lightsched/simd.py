@@ -47,8 +47,9 @@ from numba.core import cgutils, config, types
 from numba.core.codegen import get_host_cpu_features
 from numba.core.extending import intrinsic
 
+from .fade import ONE_EPS
 from .priority import R0
-from .scene import ON, SPOT
+from .scene import FADING_IN, ON, SPOT
 
 LANES = 8
 RECORD = 8  # float64 words per object record
@@ -563,7 +564,7 @@ _HELD_TYPES = (
     ((types.int32, 2), (types.int32, 2), (types.float32, 2), (types.float32, 2),
      (types.uint8, 2), (types.int32, 1), (types.int32, 1), (types.int8, 2),
      (types.boolean, 1)),
-    ((types.int8, 1), None, None, None))
+    ((types.int8, 1), None, None, None, None, None))
 
 
 def _held_exact(groups) -> bool:
@@ -580,10 +581,11 @@ def _held_exact(groups) -> bool:
 def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     """The slots of object row o when they are held in last frame's order, else -1 and
     nothing written (the caller runs its scalar path, which gives every other case).
-    Held (fade.held_slots): last frame's slots were all on and hold exactly this frame's
-    selection (DESIGN section 2, "Selection" and "Fade"); then the new slots are those
-    lights at weight 1 in output order (P descending, ties to the lower id), which
-    held_slots sorts from last frame's order. Here that order must still hold under this
+    Held: last frame's slots hold exactly this frame's selection, none fading out (DESIGN
+    section 2, "Selection" and "Fade"); then the new slots are those lights in output
+    order (P descending, ties to the lower id), each on at its weight or fading in a step
+    further (steps 1-2 of Fade; with every slot on, fade.held_slots: weight 1), which the
+    scalar path sorts from last frame's order. Here that order must still hold under this
     frame's P (P moves little between frames, so it mostly does): the outputs' rows are
     then last frame's ids with this frame's P and light rows, -1 / 0 after them.
 
@@ -593,13 +595,14 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     old slots: each ranks, by key, before every other competing light, and they are in
     order by key as well as by P (the selection's order, which the scalar path keeps).
     Writes each output row, the slot weights, the selection (as the scalar path keeps it:
-    in pair order, or by key) and slot_shadow (the first ``rules[1]`` slots in output
-    order whose light has a map: pick_slot_shadows when every weight is 1), and returns
-    the number of competing lights (the count is that, at most K). Arguments as
+    in pair order, or by key), slot_shadow (pick_slot_shadows: at most ``rules[1]``
+    slots whose light has a map, by weight, then output order) and the fading flag, and
+    returns the number of competing lights (the count is that, at most K). Arguments as
     pairs.object_pass has them (heap = (P, light row), lights = (id, live) by light row,
     state, out) and rules = (map index per light row, how many slots may take one: 0
-    when no light has a map, h, hysteresis_abs); K = 8 (the caller checks). For arrays
-    of other dtypes or layouts (none the scheduler passes) returns -1 at once.
+    when no light has a map, h, hysteresis_abs, dt/fade_in, fade_in); K = 8 (the caller
+    checks). For arrays of other dtypes or layouts (none the scheduler passes) returns -1
+    at once.
 
     Eight lanes, one pair each (two vectors of them from 9 pairs): the pairs loaded
     masked, each light's live flag and id read at its row, and every rotation of the
@@ -685,8 +688,11 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
         old = b.load(row(5, 0, _I32), align=4)
         has_old = b.icmp_signed(">=", old, splat(0, _VI32))
         n_old = count(has_old)
-        all_on = all_set(b.or_(b.not_(has_old), b.icmp_unsigned(
-            "==", b.load(row(5, 2, _I8), align=1), splat(ON, v8i8))))
+        old_st = b.load(row(5, 2, _I8), align=1)
+        on = b.icmp_unsigned("==", old_st, splat(ON, v8i8))
+        all_on = all_set(b.or_(b.not_(has_old), on))
+        none_out = all_set(b.or_(b.or_(b.not_(has_old), on), b.icmp_unsigned(
+            "==", old_st, splat(FADING_IN, v8i8))))
 
         def match(halves):
             """(every old slot's light among the halves' live pairs, and the fields of
@@ -734,7 +740,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
                 cand = count(live)
                 sel = b.select(live, ids, splat(-2, _VI32))
                 found, (old_p, old_rows) = match([(sel, (p, rows))])
-                ok = b.and_(b.and_(all_on, found), b.icmp_unsigned("==", n_old, cand))
+                ok = b.and_(b.and_(none_out, found), b.icmp_unsigned("==", n_old, cand))
                 ok = b.and_(ok, in_order(old_p))
                 for slot, value in ((ok_slot, ok), (cand_slot, cand), (p_slot, old_p),
                                     (rows_slot, old_rows)):
@@ -776,7 +782,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
                     other = b.and_(b.icmp_signed(">=", sel, splat(0, _VI32)), b.not_(mine))
                     return all_set(b.or_(b.not_(other), ranks(last_key, last_id, keys, sel)))
 
-                ok = b.and_(b.and_(all_on, found),
+                ok = b.and_(b.and_(none_out, found),
                             b.icmp_unsigned("==", n_old, ir.Constant(_I64, LANES)))
                 ok = b.and_(ok, b.icmp_signed(">", cand, ir.Constant(_I64, LANES)))
                 for more in (in_order(old_p), in_order(old_key), after(sel, keys),
@@ -791,26 +797,48 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
         with b.if_then(b.load(ok_slot)):
             first = has_old
             old_p, old_rows = b.load(p_slot), b.load(rows_slot)
+            # Weights and states: on stays on at its weight (1 while every slot is on: the
+            # weights are not read then), fading in takes a step (step 1 of Fade).
+            w_slot = cgutils.alloca_once_value(b, splat(1.0, _VF))
+            st_slot = cgutils.alloca_once_value(b, splat(ON, v8i8))
+            with b.if_then(b.not_(all_on)):
+                w_old = b.load(row(5, 1, _F64), align=8)
+                inc, fade_in = b.extract_value(rules, 4), b.extract_value(rules, 5)
+                at_once = b.fcmp_ordered("==", fade_in, ir.Constant(_F64, 0.0))
+                step = b.select(at_once, splat(1.0, _VF),
+                                b.fadd(w_old, _splat(b, inc, _VF)))
+                done = b.fcmp_ordered(">=", step, splat(1.0 - ONE_EPS, _VF))
+                b.store(b.select(on, w_old, b.select(done, splat(1.0, _VF), step)), w_slot)
+                b.store(b.select(b.or_(on, done), splat(ON, v8i8), splat(FADING_IN, v8i8)),
+                        st_slot)
+            w = b.select(first, b.load(w_slot), splat(0.0, _VF))
+            st = b.select(first, b.load(st_slot), splat(0, v8i8))
+            fading = b.icmp_unsigned("!=", b.bitcast(b.and_(first, b.icmp_unsigned(
+                "!=", st, splat(ON, v8i8))), _I8), ir.Constant(_I8, 0))
             b.store(old, row(6, 0, _I32), align=4)
             b.store(b.select(first, old_rows, splat(-1, _VI32)), row(6, 1, _I32), align=4)
             b.store(b.select(first, b.fptrunc(old_p, v8f32), splat(0.0, v8f32)),
                     row(6, 2, ir.FloatType()), align=4)
-            b.store(b.select(first, splat(1.0, v8f32), splat(0.0, v8f32)),
-                    row(6, 3, ir.FloatType()), align=4)
-            b.store(b.select(first, splat(ON, v8i8), splat(0, v8i8)), row(6, 4, _I8), align=1)
-            b.store(b.select(first, splat(1.0, _VF), splat(0.0, _VF)), row(5, 1, _F64),
-                    align=8)
-            # slot_shadow: -1, then the first q slots whose light has a map (a slot's
-            # rank among those is the count of such slots before it).
+            b.store(b.fptrunc(w, v8f32), row(6, 3, ir.FloatType()), align=4)
+            b.store(st, row(6, 4, _I8), align=1)
+            b.store(w, row(5, 1, _F64), align=8)
+            fading_ptr = b.gep(data(6, 8, _I8), [args[0]])
+            b.store(b.zext(fading, _I8), fading_ptr)
+            # slot_shadow: -1, then at most q slots whose light has a map, by weight
+            # descending, then output order: a slot's rank among those is the count of
+            # such slots of a higher weight, or of the same weight before it.
             q = b.extract_value(rules, 1)
             map_slot = cgutils.alloca_once_value(b, splat(-1, v8i8))
             with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
                 maps = at_rows(data(7, 0, _I8), old_rows)
                 has = b.and_(first, b.icmp_signed(">=", maps, splat(0, v8i8)))
-                before = b.and_(_splat(b, b.bitcast(has, _I8), v8i8),
-                                ir.Constant(v8i8, [(1 << i) - 1 for i in range(LANES)]))
-                ctpop = _declare(b, "llvm.ctpop.v8i8", v8i8, [v8i8])
-                rank = b.zext(b.call(ctpop, [before]), _VI64)
+                rank = splat(0, _VI64)
+                for r in range(1, LANES):
+                    w_r = turn(w, r)
+                    earlier = ir.Constant(_VB, [int((i + r) % LANES < i) for i in range(LANES)])
+                    before = b.or_(b.fcmp_ordered(">", w_r, w),
+                                   b.and_(b.fcmp_ordered("==", w_r, w), earlier))
+                    rank = b.add(rank, b.zext(b.and_(turn(has, r), before), _VI64))
                 q64 = context.cast(b, q, signature.args[7][1], types.int64)
                 keep = b.and_(has, b.icmp_signed("<", rank, _splat(b, q64, _VI64)))
                 b.store(b.select(keep, maps, splat(-1, v8i8)), map_slot)

@@ -96,8 +96,8 @@ def _compiled(in_register: bool):
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
-        held(0, 0, 1, case[2][1], case[3], case[4], case[5], (case[7][0], np.int64(0), 0.1,
-                                                              0.05))
+        held(0, 0, 1, case[2][1], case[3], case[4], case[5],
+             (case[7][0], np.int64(0), 0.1, 0.05, 0.25, 0.2))
         return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
@@ -106,12 +106,12 @@ def _compiled(in_register: bool):
 HELD_KINDS = ("held", "reordered", "outranked", "fading", "other", "reset", "hidden")
 
 
-def held_case(rng, kinds, n_l, max_shadowed, ties):
+def held_case(rng, kinds, n_l, max_shadowed, ties, fade_in=0.2):
     """pairs.object_pass's arguments (K = 8) for one object of each kind: "held" (last
     frame's slots all on, holding its competing lights in output order under this frame's
     P), "reordered" (the same with two neighbouring slots swapped), "outranked" (held, but
     by the last K of its lights by P: others may rank first even against their
-    hysteresis), "fading" (held, one slot fading in), "other" (random slots and states),
+    hysteresis), "fading" (held, some slots fading in), "other" (random slots and states),
     "reset" (step 3), "hidden" (not visible); each with 0-18 pairs of n_l lights (some
     not live), P from a few values (``ties``) or continuous, maps on some lights."""
     k = simd.LANES
@@ -134,17 +134,18 @@ def held_case(rng, kinds, n_l, max_shadowed, ties):
                 old[[t, t + 1]] = old[[t + 1, t]]
             states = np.full(old.size, ON)
             if kind == "fading" and old.size:
-                states[int(rng.integers(0, old.size))] = FADING_IN
+                states[rng.permutation(old.size)[:int(rng.integers(1, 4))]] = FADING_IN
             sel = rng.permutation(old)
         objects.append((kind, p, rows, old, states, sel))
     shadow_of_row = rng.choice(np.array([-1, -1, 0, 1, 2, 3], np.int8), n_l)
-    return pass_arguments(rng, objects, (ids, live), shadow_of_row, max_shadowed)
+    return pass_arguments(rng, objects, (ids, live), shadow_of_row, max_shadowed, fade_in)
 
 
-def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed):
+def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed, fade_in=0.2):
     """pairs.object_pass's arguments (K = 8) for objects = [(kind, P and light rows of
     its pairs, last frame's slot ids and states, last frame's selection)] (kinds "reset"
-    and "hidden" as held_case's), with a few pairs of no object between them."""
+    and "hidden" as held_case's), with a few pairs of no object between them; slots not
+    on have weights of a few values (ties, one a step short of 1 within 1e-6) or any."""
     k = simd.LANES
     n = len(objects)
     n_l = lights[0].size
@@ -161,7 +162,8 @@ def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed):
         heap_j += [rows, rng.integers(0, n_l, gap)]
         s_id[o, :old.size] = old
         s_st[o, :old.size] = states
-        s_w[o, :old.size] = np.where(states == ON, 1.0, rng.uniform(0.1, 0.9, old.size))
+        weights = rng.choice([0.25, 0.5, 0.5, 0.7499995, rng.uniform(0.1, 0.9)], old.size)
+        s_w[o, :old.size] = np.where(states == ON, 1.0, weights)
         s_sel[o, :sel.size] = sel
     kinds = [obj[0] for obj in objects]
     visible = np.array([kind != "hidden" for kind in kinds])
@@ -170,7 +172,7 @@ def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed):
            np.full((n, k), -9.0, np.float32), np.full((n, k), -9.0, np.float32),
            np.full((n, k), 9, np.uint8), np.full(n, -9, np.int32), np.full(n, -9, np.int32),
            np.full((n, k), -9, np.int8), np.ones(n, np.bool_))
-    params = np.array([0.1, 0.05, 0.25, 0.25, 0.2, 0.2])
+    params = np.array([0.1, 0.05, 0.25 if fade_in else 1.0, 0.25, fade_in, 0.2])
     heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
     return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), lights,
             (s_id, s_w, s_st, s_sel), out, params, (shadow_of_row, np.int64(max_shadowed)),
@@ -181,8 +183,8 @@ def check_held(case, kinds, packings):
     """object_pass (held objects through held_row) == object_pass on its scalar path (the
     heap's P as a strided view, which held_row does not take) in every output and state,
     bit for bit; and held_row alone, for each packing, gives each object's row of them
-    or -1 with nothing written, and takes every "held" object of 1-8 pairs, or of 9-16
-    pairs with more than 8 competing."""
+    or -1 with nothing written, and takes every "held" and "fading" object of 1-8 pairs,
+    or of 9-16 pairs with more than 8 competing."""
     run, objs, (seg, heap), lights, state, out, params, shadow, k_static = case
     strided = np.zeros(2 * heap[0].size)[::2]
     strided[:] = heap[0]
@@ -193,7 +195,7 @@ def check_held(case, kinds, packings):
     for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
     q = np.int64(shadow[1] if (shadow[0] >= 0).any() and shadow[1] > 0 else 0)
-    rules = (shadow[0], q, params[0], params[1])
+    rules = (shadow[0], q, params[0], params[1], params[2], params[4])
     for packing in packings:
         for o, kind in enumerate(kinds):
             n = seg[o, 1]
@@ -202,14 +204,15 @@ def check_held(case, kinds, packings):
             mine = copy.deepcopy((state, out))
             cand = HELD[packing](o, seg[o, 0], n, heap, lights, *mine, rules)
             wide = want[1][6][o] > simd.LANES
-            assert cand >= 0 or kind != "held" or (n > simd.LANES) != wide, (o, kind)
+            taken = kind in ("held", "fading") and (n > simd.LANES) == wide
+            assert cand >= 0 or not taken, (o, kind)
             rows = [x[o] for x in mine[0] + mine[1][:5] + mine[1][7:8]]
             if cand < 0:
                 before = [x[o] for x in state + out[:5] + out[7:8]]
                 assert all(np.array_equal(a, b) for a, b in zip(rows, before, strict=True))
                 continue
             assert cand == want[1][6][o] and min(cand, simd.LANES) == want[1][5][o]
-            assert not want[1][8][o], (o, packing)
+            assert mine[1][8][o] == want[1][8][o], (o, packing)
             wanted = [x[o] for x in want[0] + want[1][:5] + want[1][7:8]]
             for a, b in zip(rows, wanted, strict=True):
                 assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), (o, kind, packing)
@@ -524,12 +527,12 @@ def test_candidate_run_leaves_float32_records_to_the_scalar_loop():
 @examples(3.0)
 @given(kinds=st.lists(st.sampled_from(HELD_KINDS), min_size=1, max_size=12),
        n_l=st.integers(1, 24), max_shadowed=st.integers(0, 3), ties=st.booleans(),
-       seed=st.integers(0, 2**32 - 1))
-def test_held_row_equals_the_scalar_path(kinds, n_l, max_shadowed, ties, seed):
+       fade_in=st.sampled_from([0.2, 0.0]), seed=st.integers(0, 2**32 - 1))
+def test_held_row_equals_the_scalar_path(kinds, n_l, max_shadowed, ties, fade_in, seed):
     """held_row inside object_pass and alone: the scalar path's outputs and state bit for
-    bit (check_held), on objects held in order, reordered, fading, of other slots, reset
-    and hidden, with ties of P and maps on some lights."""
-    case = held_case(np.random.default_rng(seed), kinds, n_l, max_shadowed, ties)
+    bit (check_held), on objects held in order, reordered, outranked, fading in, of other
+    slots, reset and hidden, with ties of P, maps on some lights, fades at once or not."""
+    case = held_case(np.random.default_rng(seed), kinds, n_l, max_shadowed, ties, fade_in)
     check_held(case, kinds, PACKINGS)
 
 
@@ -541,7 +544,7 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
     seg = case[2][0]
-    rules = (case[7][0], np.int64(2), case[6][0], case[6][1])
+    rules = (case[7][0], np.int64(2), case[6][0], case[6][1], case[6][2], case[6][4])
     taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], case[3],
                                 *copy.deepcopy((case[4], case[5])), rules)
              for o in range(len(kinds)) if 1 <= seg[o, 1] <= 2 * simd.LANES]
@@ -573,7 +576,7 @@ def test_held_row_keeps_the_selection_by_key():
     check_held(case, ["keys tie"], PACKINGS)
     assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], case[3],
                               *copy.deepcopy((case[4], case[5])),
-                              (case[7][0], np.int64(0), h, h_abs)) == -1
+                              (case[7][0], np.int64(0), h, h_abs, 0.25, 0.2)) == -1
 
 
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
