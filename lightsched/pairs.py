@@ -1035,7 +1035,9 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
     result is fade.held_slots: last frame's order, sorted again by this frame's P) and
-    read only last frame's ids and states.
+    read only last frame's ids and states. With K = 8 those still in last frame's order
+    (83% of a full (100k, 10k) frame's rows), and those whose slots only fade in, go
+    through simd.held_row, one vector store an output row; the rest run the code below.
     """
     visible, reset = objs
     seg, (heap_p, heap_j) = lists
