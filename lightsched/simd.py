@@ -96,6 +96,26 @@ def _splat(builder: ir.IRBuilder, x: ir.Value, vty: ir.VectorType) -> ir.Value:
                                   ir.Constant(_VI32, [0] * LANES))
 
 
+def _masked_load(builder: ir.IRBuilder, ptr: ir.Value, lanes: ir.Value, fill: ir.Value
+                 ) -> ir.Value:
+    """The lanes of the vector at ``ptr`` (``fill`` elsewhere; a lane off reads no memory)."""
+    suffix, size = _element(fill.type)
+    fn = _declare(builder, f"llvm.masked.load.v8{suffix}.p0", fill.type,
+                  [ptr.type, _I32, _VB, fill.type])
+    return builder.call(fn, [ptr, ir.Constant(_I32, size), lanes, fill])
+
+
+def _at_rows(builder: ir.IRBuilder, ptr: ir.Value, rows: ir.Value) -> ir.Value:
+    """ptr[rows[k]] in lane k, by scalar loads (every lane a valid row): cheaper than a
+    gather for bytes, which x86 cannot gather."""
+    vec = ir.Constant(ir.VectorType(ptr.type.pointee, LANES), ir.Undefined)
+    for k in range(LANES):
+        at = builder.extract_element(rows, ir.Constant(_I32, k))
+        value = builder.load(builder.gep(ptr, [builder.sext(at, _I64)]))
+        vec = builder.insert_element(vec, value, ir.Constant(_I32, k))
+    return vec
+
+
 def _transpose(builder: ir.IRBuilder, recs: list[ir.Value]) -> list[ir.Value]:
     """Eight records (one vector each) -> eight fields (one vector each, lane k from record
     k): three rounds of two-source shuffles (pairs, quads, halves)."""
@@ -140,10 +160,6 @@ class _Run:
         self.p_user = light[6]
         self.maxnum = _declare(b, "llvm.maxnum.v8f64", _VF, [_VF, _VF])
         self.minnum = _declare(b, "llvm.minnum.v8f64", _VF, [_VF, _VF])
-        self.load_f = _declare(b, "llvm.masked.load.v8f64.p0", _VF,
-                               [ir.PointerType(_VF), _I32, _VB, _VF])
-        self.load_i32 = _declare(b, "llvm.masked.load.v8i32.p0", _VI32,
-                                 [ir.PointerType(_VI32), _I32, _VB, _VI32])
         self.popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
 
     def records(self, box: ir.Value, v: ir.Value, left: ir.Value | None) -> list[ir.Value]:
@@ -158,7 +174,7 @@ class _Run:
                 recs.append(b.load(ptr, align=8))
                 continue
             live = _splat(b, b.icmp_signed("<", ir.Constant(_I64, k), left), _VB)
-            recs.append(b.call(self.load_f, [ptr, ir.Constant(_I32, 8), live, self.zero]))
+            recs.append(_masked_load(b, ptr, live, self.zero))
         return _transpose(b, recs)
 
     def records_at(self, box: ir.Value, at: ir.Value) -> list[ir.Value]:
@@ -179,18 +195,9 @@ class _Run:
             if lanes is None:
                 recs.append(b.load(ptr, align=8))
                 continue
-            load = _declare(b, "llvm.masked.load.v8f64.p0", _VF,
-                            [ir.PointerType(_VF), _I32, _VB, _VF])
             live = _splat(b, b.extract_element(lanes, ir.Constant(_I32, k)), _VB)
-            recs.append(b.call(load, [ptr, ir.Constant(_I32, 8), live,
-                                      ir.Constant(_VF, [0.0] * LANES)]))
+            recs.append(_masked_load(b, ptr, live, ir.Constant(_VF, [0.0] * LANES)))
         return _transpose(b, recs)
-
-    def masked(self, load: ir.Function, ptr: ir.Value, lanes: ir.Value,
-               fill: ir.Value) -> ir.Value:
-        """The lanes of the vector at ``ptr`` (``fill`` elsewhere)."""
-        size = _element(fill.type)[1]
-        return self.b.call(load, [ptr, ir.Constant(_I32, size), lanes, fill])
 
     def hits_at(self, p_ptr: ir.Value, obj_ptr: ir.Value, i: ir.Value, end: ir.Value
                 ) -> tuple[ir.Value, ...]:
@@ -200,9 +207,8 @@ class _Run:
         lanes = b.icmp_signed("<", self.iota, _splat(b, b.sub(end, i), _VI64))
         p_at = b.bitcast(b.gep(p_ptr, [i]), ir.PointerType(_VF))
         obj_at = b.bitcast(b.gep(obj_ptr, [i]), ir.PointerType(_VI32))
-        d2 = self.masked(self.load_f, p_at, lanes, self.zero)
-        at = b.sext(self.masked(self.load_i32, obj_at, lanes, ir.Constant(_VI32, [0] * LANES)),
-                    _VI64)
+        d2 = _masked_load(b, p_at, lanes, self.zero)
+        at = b.sext(_masked_load(b, obj_at, lanes, ir.Constant(_VI32, [0] * LANES)), _VI64)
         return lanes, p_at, obj_at, d2, at
 
     def gather(self, base: ir.Value, at: ir.Value, lanes: ir.Value, fill: ir.Value
@@ -513,20 +519,13 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
         iota = ir.Constant(_VI64, list(range(LANES)))
         with cgutils.for_range_slice(builder, a_, b_, ir.Constant(_I64, LANES)) as (i, _):
             lanes = builder.icmp_signed("<", iota, _splat(builder, builder.sub(b_, i), _VI64))
-            load_i32 = _declare(builder, "llvm.masked.load.v8i32.p0", _VI32,
-                                [ir.PointerType(_VI32), _I32, _VB, _VI32])
-            rows32 = builder.call(load_i32, [
-                builder.bitcast(builder.gep(cj_ptr, [i]), ir.PointerType(_VI32)),
-                ir.Constant(_I32, 4), lanes, ir.Constant(_VI32, [0] * LANES)])
+            cj_at = builder.bitcast(builder.gep(cj_ptr, [i]), ir.PointerType(_VI32))
+            rows32 = _masked_load(builder, cj_at, lanes, ir.Constant(_VI32, [0] * LANES))
             rows = builder.sext(rows32, _VI64)
             # Lanes past the end read light row 0, which exists (there are candidates).
             light = _Run.fields_at(builder, hot_ptr, rows)
             run = _Run(builder, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
-            comp = ir.Constant(ir.VectorType(_I8, LANES), ir.Undefined)
-            for k in range(LANES):
-                row = builder.extract_element(rows, ir.Constant(_I32, k))
-                comp = builder.insert_element(comp, builder.load(builder.gep(comp_ptr, [row])),
-                                              ir.Constant(_I32, k))
+            comp = _at_rows(builder, comp_ptr, rows32)
             live = builder.and_(lanes, builder.icmp_unsigned(
                 "!=", comp, ir.Constant(ir.VectorType(_I8, LANES), [0] * LANES)))
             hit, d2 = run.hits(f, live)
@@ -643,21 +642,6 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
             at = b.gep(data(k, i, elem), [b.mul(args[0], ir.Constant(_I64, LANES))])
             return b.bitcast(at, ir.PointerType(ir.VectorType(elem, LANES)))
 
-        def masked_load(ptr, lanes, fill):
-            suffix, size = _element(fill.type)
-            fn = _declare(b, f"llvm.masked.load.v8{suffix}.p0", fill.type,
-                          [ptr.type, _I32, _VB, fill.type])
-            return b.call(fn, [ptr, ir.Constant(_I32, size), lanes, fill])
-
-        def at_rows(ptr, rows):
-            """ptr[rows[k]] in lane k, by scalar loads (every lane a valid row)."""
-            vec = ir.Constant(ir.VectorType(ptr.type.pointee, LANES), ir.Undefined)
-            for k in range(LANES):
-                r = b.extract_element(rows, ir.Constant(_I32, k))
-                vec = b.insert_element(vec, b.load(b.gep(ptr, [b.sext(r, _I64)])),
-                                       ir.Constant(_I32, k))
-            return vec
-
         def splat(value, vty):
             return ir.Constant(vty, [value] * LANES)
 
@@ -681,12 +665,12 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
             """(P, light row, id, live) of eight pairs from heap record ``start``;
             ``lanes`` are pairs, the others read light row 0, which exists (the object
             has a pair) and are not live."""
-            p = masked_load(b.bitcast(b.gep(data(3, 0, _F64), [start]), ir.PointerType(_VF)),
-                            lanes, splat(0.0, _VF))
-            rows = masked_load(b.bitcast(b.gep(data(3, 1, _I32), [start]),
-                                         ir.PointerType(_VI32)), lanes, splat(0, _VI32))
-            live = b.icmp_unsigned("!=", at_rows(data(4, 1, _I8), rows), splat(0, v8i8))
-            return p, rows, at_rows(data(4, 0, _I32), rows), b.and_(lanes, live)
+            p_at = b.bitcast(b.gep(data(3, 0, _F64), [start]), ir.PointerType(_VF))
+            p = _masked_load(b, p_at, lanes, splat(0.0, _VF))
+            rows_at = b.bitcast(b.gep(data(3, 1, _I32), [start]), ir.PointerType(_VI32))
+            rows = _masked_load(b, rows_at, lanes, splat(0, _VI32))
+            live = b.icmp_unsigned("!=", _at_rows(b, data(4, 1, _I8), rows), splat(0, v8i8))
+            return p, rows, _at_rows(b, data(4, 0, _I32), rows), b.and_(lanes, live)
 
         old = b.load(row(5, 0, _I32), align=4)
         has_old = b.icmp_signed(">=", old, splat(0, _VI32))
@@ -833,7 +817,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
             q = b.extract_value(rules, 1)
             map_slot = cgutils.alloca_once_value(b, splat(-1, v8i8))
             with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
-                maps = at_rows(data(7, 0, _I8), old_rows)
+                maps = _at_rows(b, data(7, 0, _I8), old_rows)
                 has = b.and_(first, b.icmp_signed(">=", maps, splat(0, v8i8)))
                 rank = splat(0, _VI64)
                 for r in range(1, LANES):

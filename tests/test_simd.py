@@ -96,8 +96,7 @@ def _compiled(in_register: bool):
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
-        held(0, 0, 1, case[2][1], case[3], case[4], case[5],
-             (case[7][0], np.int64(0), 0.1, 0.05, 0.25, 0.2))
+        held(0, 0, 1, case[2][1], case[3], case[4], case[5], held_rules(case))
         return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
@@ -179,6 +178,13 @@ def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed, fade_in=0.
             (0,) * k)
 
 
+def held_rules(case):
+    """held_row's rules for a case of pass_arguments, as object_pass makes them."""
+    _, _, _, _, _, _, params, (shadow_of_row, max_shadowed), _ = case
+    q = max_shadowed if (shadow_of_row >= 0).any() and max_shadowed > 0 else 0
+    return (shadow_of_row, np.int64(q), params[0], params[1], params[2], params[4])
+
+
 def check_held(case, kinds, packings):
     """object_pass (held objects through held_row) == object_pass on its scalar path (the
     heap's P as a strided view, which held_row does not take) in every output and state,
@@ -194,8 +200,7 @@ def check_held(case, kinds, packings):
     object_pass(run, objs, (seg, heap), lights, *got, params, shadow, k_static)
     for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
-    q = np.int64(shadow[1] if (shadow[0] >= 0).any() and shadow[1] > 0 else 0)
-    rules = (shadow[0], q, params[0], params[1], params[2], params[4])
+    rules = held_rules(case)
     for packing in packings:
         for o, kind in enumerate(kinds):
             n = seg[o, 1]
@@ -544,9 +549,8 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
     seg = case[2][0]
-    rules = (case[7][0], np.int64(2), case[6][0], case[6][1], case[6][2], case[6][4])
     taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], case[3],
-                                *copy.deepcopy((case[4], case[5])), rules)
+                                *copy.deepcopy((case[4], case[5])), held_rules(case))
              for o in range(len(kinds)) if 1 <= seg[o, 1] <= 2 * simd.LANES]
     held = [cand for cand in taken if cand >= 0]
     assert 70 < len(held) < len(taken)
@@ -575,8 +579,7 @@ def test_held_row_keeps_the_selection_by_key():
                           np.full(9, -1, np.int8), 0)
     check_held(case, ["keys tie"], PACKINGS)
     assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], case[3],
-                              *copy.deepcopy((case[4], case[5])),
-                              (case[7][0], np.int64(0), h, h_abs, 0.25, 0.2)) == -1
+                              *copy.deepcopy((case[4], case[5])), held_rules(case)) == -1
 
 
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
