@@ -85,11 +85,14 @@ MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
-# candidate_pairs asks for the light rows of the object this many rows ahead: an object's
-# candidates are rows of light_hot at random, which the records streaming through L2 push
-# out (on captured inputs, 2 threads: (100k, 10k) 4.32 -> 3.93 ms, (1M, 100k) 60.8 -> 46.6;
-# two objects ahead 4.07 and 51.1, four 4.19; light_f's rows too, 5.61 against 4.87).
+# candidate_pairs asks for the light rows of the object this many rows ahead, once
+# light_hot is over PREFETCH_BYTES: an object's candidates are rows of it at random, which
+# the records streaming through L2 push out (on captured inputs, 2 threads: (100k, 10k)
+# 4.32 -> 3.93 ms, (1M, 100k) 60.8 -> 46.6; two objects ahead 4.07 and 51.1, four 4.19;
+# light_f's rows too, 5.61 against 4.87). The 64 KB of 1k lights stay cached: there the
+# prefetches cost +0.03 ms of a full (10k, 1k) frame (bench/RESULTS.md).
 PREFETCH_OBJECTS = 1
+PREFETCH_BYTES = 1 << 18
 RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 
@@ -752,8 +755,8 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     the lists' upkeep included). Under the contribution model with float64 records an
     object's candidates go eight at a time through simd.candidate_run (the same bits;
     the lists stage of a full (100k, 10k) frame ~5.1 -> ~3.8 ms); otherwise the scalar
-    loop below. The light rows of the next object's candidates are prefetched while this
-    one's are tested (PREFETCH_OBJECTS).
+    loop below. Where the lights' rows do not stay cached, those of the next object's
+    candidates are prefetched while this one's are tested (PREFETCH_OBJECTS).
 
     cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
     integer view): the grid's records in object row order; lights = (light_hot, light_f);
@@ -770,6 +773,7 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     # candidate_run reads whole 8-word rows.
     vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
               and lf.shape[1] == 8)
+    far = hot.nbytes > PREFETCH_BYTES
     room = 0
     for o in range(n):
         o_seg[o, 0] = room
@@ -779,7 +783,7 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
             m = o_seg[o, 0]
             ahead = o + PREFETCH_OBJECTS
-            if ahead < n and bits[ahead, 6] != 0:
+            if far and ahead < n and bits[ahead, 6] != 0:
                 for t in range(c_seg[ahead, 0], c_seg[ahead, 0] + c_seg[ahead, 1]):
                     prefetch_row(hot, c_j[t])
             ob = np.int64(bits[o, 6])
