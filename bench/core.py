@@ -17,7 +17,8 @@ before ``s.frame(...)`` and not timed, only ``s.frame(...)`` is:
   object records are built again, every stage runs;
 - ``static``: nothing changes (no update call, the same camera objects, dt = 1/60);
 - ``lights10``: a fixed seeded 10% of the point and spot lights move (``update_lights`` with
-  those rows only, positions from ``move_lights`` on the subset);
+  those rows only, positions from ``move_lights`` on the subset); ``lights1`` the same with
+  1%;
 - ``camera``: only the camera moves, 0.5 m per frame on a horizontal orbit round the city
   centre, looking at it;
 - ``objects1``: a fixed seeded 1% of the objects move (``update_objects`` with those rows
@@ -87,6 +88,7 @@ SCENARIOS = {
     "all": "every light and the camera move",
     "static": "nothing changes",
     "lights10": "10% of the point/spot lights move",
+    "lights1": "1% of the point/spot lights move",
     "camera": "only the camera moves (0.5 m per frame)",
     "objects1": "1% of the objects move",
 }
@@ -94,7 +96,7 @@ DEFAULT_SCENARIOS = ",".join(SCENARIOS)
 DEFAULT_SIZES = "10k:1k,100k:10k,1M:100k"
 QUICK_SIZES, QUICK_SCENARIOS = "10k:1k,100k:10k", "full,static,lights10"
 INCREMENTAL_WARMUP = 20  # > fade_in / fade_out (0.25 s = 15 frames at 60 fps)
-LIGHT_FRACTION, OBJECT_FRACTION = 0.10, 0.01
+LIGHT_FRACTIONS, OBJECT_FRACTION = {"lights10": 0.10, "lights1": 0.01}, 0.01
 CAMERA_STEP = 0.5  # metres per frame along the orbit
 OBJECT_CIRCLE, OBJECT_SPEED = 2.0, 3.0  # metres, metres per second
 
@@ -153,10 +155,10 @@ class Motion:
         self.cameras = list(scene.cameras)
         self.warmup_min = 0 if name in FULL else INCREMENTAL_WARMUP
         lights, objects = scene.lights, scene.objects
-        if name == "lights10":
+        if name in LIGHT_FRACTIONS:
             rng = np.random.default_rng([seed, 610])
             movable = np.flatnonzero(np.asarray(lights["type"]) != DIRECTIONAL)
-            k = min(movable.size, max(1, round(LIGHT_FRACTION * movable.size)))
+            k = min(movable.size, max(1, round(LIGHT_FRACTIONS[name] * movable.size)))
             rows = np.sort(rng.choice(movable, size=k, replace=False))
             self.sub = {key: np.asarray(v)[rows] for key, v in lights.items()}
         elif name == "objects1":
@@ -187,7 +189,7 @@ class Motion:
             self.changed = int(np.asarray(lights["id"]).size)
             if self.name == "all":
                 return self.orbit_cameras(i)
-        elif self.name == "lights10":
+        elif self.name in LIGHT_FRACTIONS:
             s.update_lights(id=self.sub["id"], position=move_lights(self.sub, i))
             self.changed = int(self.sub["id"].size)
         elif self.name == "objects1":
@@ -459,8 +461,9 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
            "every light moves and the camera moves as in `camera` (every stage runs); "
            "`static` nothing changes (no update, the same cameras, dt = 1/60); `lights10` a "
            "fixed seeded 10% of the point/spot lights move (`update_lights` with those rows "
-           "only); `camera` only the camera moves, 0.5 m per frame on an orbit round the "
-           "city centre, looking at it; `objects1` a fixed seeded 1% of the objects move on "
+           "only), `lights1` 1% of them; `camera` only the camera moves, 0.5 m per frame "
+           "on an orbit round the city centre, looking at it; `objects1` a fixed seeded 1% "
+           "of the objects move on "
            f"2 m circles (`update_objects` with those rows only). Scenarios other than `full` and `all` "
            f"run at N <= {upto} only. Targets are issue 6's (2-core machine); \"plan\" is the "
            "last frame's `stats[\"plan\"]` values.", "",
@@ -550,6 +553,7 @@ def incremental_answer(results: list[dict[str, Any]]) -> str:
     sizes = {(r["n"], r["l"]) for r in inc}
     n, l = (100_000, 10_000) if (100_000, 10_000) in sizes else max(sizes)
     words = {"static": "nothing moved", "lights10": "10% of the lights moved",
+             "lights1": "1% of the lights moved",
              "camera": "only the camera moved", "objects1": "1% of the objects moved"}
     parts = []
     for r in inc:
