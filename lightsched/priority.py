@@ -73,19 +73,27 @@ def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _pack(store, cams, thesis_w, origin, out):
+def _pack(rows, store, cams, thesis_w, origin, out):
     """store = the light store's (type, position, radius, direction, outer_angle,
     inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,
     tan_xy, focus), zero cameras for the contribution model (column 7 stays -inf);
-    out = (hot, lf), [L, 8] each, every element written."""
-    n = store[0].shape[0]
+    out = (hot, lf), [L, 8] each: every element of the light rows ``rows`` written (every
+    row when it is None)."""
     hot, lf = out
-    if n < SERIAL_LIGHTS:
-        for j in range(n):
-            _pack_row(j, hot, lf, store, cams, thesis_w, origin)
+    if rows is None:
+        n = store[0].shape[0]
+        if n < SERIAL_LIGHTS:
+            for j in range(n):
+                _pack_row(j, hot, lf, store, cams, thesis_w, origin)
+        else:
+            for j in nb.prange(n):
+                _pack_row(j, hot, lf, store, cams, thesis_w, origin)
+    elif rows.shape[0] < SERIAL_LIGHTS:
+        for t in range(rows.shape[0]):
+            _pack_row(rows[t], hot, lf, store, cams, thesis_w, origin)
     else:
-        for j in nb.prange(n):
-            _pack_row(j, hot, lf, store, cams, thesis_w, origin)
+        for t in nb.prange(rows.shape[0]):
+            _pack_row(rows[t], hot, lf, store, cams, thesis_w, origin)
     return hot, lf
 
 
@@ -96,20 +104,27 @@ def light_columns(lights: LightStore) -> tuple[np.ndarray, ...]:
 
 
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
-                c1: float, camera_term: bool = True, origin: np.ndarray | None = None
+                c1: float, camera_term: bool = True, origin: np.ndarray | None = None,
+                into: tuple[tuple[np.ndarray, np.ndarray], np.ndarray] | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Packs the light store into the row layout above (one cache-friendly row per light).
     Without ``camera_term`` (the contribution model, which does not read it) light_f
     column 7 is -inf: the eccentricity is the packing's costliest part. Positions are
     relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
-    is x)."""
+    is x). ``into`` = (last frame's packed lights, the light rows that changed): only those
+    rows are packed again, in place (the other rows, the cameras where they count and the
+    origin as they were: an incremental frame)."""
     cams = slice(None) if camera_term else slice(0)
     cam_columns = (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
                    frames.focus[cams])
-    # One buffer for both: rows of 64 bytes, so light_f starts on a cache line too.
-    out = aligned_empty((2, len(lights.id), 8))
-    return _pack(light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
-                 np.zeros(3) if origin is None else origin, (out[0], out[1]))
+    if into is None:
+        # One buffer for both: rows of 64 bytes, so light_f starts on a cache line too.
+        out = aligned_empty((2, len(lights.id), 8))
+        packed, rows = (out[0], out[1]), None
+    else:
+        packed, rows = into
+    return _pack(rows, light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
+                 np.zeros(3) if origin is None else origin, packed)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -346,9 +346,16 @@ class Scheduler(SceneAPI):
                                          frames.plane_p)
         t = _lap(seconds, "visibility", t)
 
-        if full or lrows.size or (not same_cams and cfg.model != "contribution"):
+        if full or (not same_cams and cfg.model != "contribution"):
             packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
                                  cfg.model == "thesis", rec_frame[0])
+        elif lrows.size:
+            # Only the changed rows, in last frame's arrays (this frame's to change): at
+            # (100k, 10k) the stage 0.22 -> 0.09 ms with 1000 lights moving, 0.26 -> 0.05
+            # with 100 (interleaved frames, medians of 100).
+            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
+                                 cfg.model == "thesis", rec_frame[0],
+                                 into=(c.packed, lrows.astype(np.int64)))
         else:
             packed = c.packed
         is_dir = lights.type == DIRECTIONAL

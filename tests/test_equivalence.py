@@ -384,7 +384,9 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
 def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     """Below SERIAL_LIGHTS lights the per-light kernels loop on the calling thread (the
     oracle tests' scenes), from it in parallel: a prefix of the lights gets the same rows
-    from the serial loop as from the parallel one."""
+    from the serial loop as from the parallel one. The packing of some rows in place (an
+    incremental frame's changed lights) writes those rows as a whole packing does, and no
+    other."""
     from lightsched.frustum import SERIAL_LIGHTS, lights_visible
     from lightsched.pairs import light_bounds
     from lightsched.priority import _pack, light_columns
@@ -400,15 +402,26 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
 
     UNSET = -7.25e300
 
-    def pack(m: int) -> tuple[np.ndarray, np.ndarray]:
+    def pack(m: int, rows: np.ndarray | None = None, out: Any = None
+             ) -> tuple[np.ndarray, np.ndarray]:
         store = tuple(a[:m] for a in light_columns(lights))
-        return _pack(store, (f.position, f.basis, f.tan_xy, f.focus),
+        return _pack(rows, store, (f.position, f.basis, f.tan_xy, f.focus),
                      np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3),
-                     (np.full((m, 8), UNSET), np.full((m, 8), UNSET)))
+                     out or (np.full((m, 8), UNSET), np.full((m, 8), UNSET)))
 
     for a, b in zip(pack(n), pack(few), strict=True):
         assert np.array_equal(a[:few], b, equal_nan=True)
         assert not (a == UNSET).any()  # every element written
+    # Rows packed again in place (an incremental frame's changed lights), a few or many:
+    # those rows as a whole packing has them, no other row touched.
+    whole = pack(n)
+    for rows in (np.array([0, 5, n - 1]), np.arange(1, n, 2)):
+        out = tuple(np.full((n, 8), UNSET) for _ in range(2))
+        pack(n, rows, out)
+        for a, b in zip(out, whole, strict=True):
+            assert np.array_equal(a[rows], b[rows], equal_nan=True)
+            others = np.setdiff1d(np.arange(n), rows)
+            assert (a[others] == UNSET).all()
     vis = [lights_visible(lights.type[:m], lights.position[:m], lights.radius[:m], f.plane_n,
                           f.plane_p) for m in (n, few)]
     assert np.array_equal(vis[0][:few], vis[1]) and vis[1].any() and not vis[1].all()
