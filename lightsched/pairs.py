@@ -90,7 +90,7 @@ LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 # the records streaming through L2 push out (on captured inputs, 2 threads: (100k, 10k)
 # 4.32 -> 3.93 ms, (1M, 100k) 60.8 -> 46.6; two objects ahead 4.07 and 51.1, four 4.19;
 # light_f's rows too, 5.61 against 4.87). The 64 KB of 1k lights stay cached: there the
-# prefetches cost +0.03 ms of a full (10k, 1k) frame (bench/RESULTS.md).
+# prefetches cost +0.04 ms of a full (10k, 1k) frame (paired; bench/RESULTS.md).
 PREFETCH_OBJECTS = 1
 PREFETCH_BYTES = 1 << 18
 RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)

@@ -110,6 +110,10 @@ def test_changed_lights_recompute_only_the_objects_they_touch(field):
         f, _ = t.frame(cams, dt=0.05)
         assert _plan(f).startswith("incremental"), f.stats["plan"]
         assert f.stats["counts"]["changed_lights"] <= 12
+        changed = f.stats["counts"]["changed_lights"]
+        assert f.stats["plan"]["priority"].endswith(
+            f"; the {changed} changed lights packed again, the others kept"
+            if changed else "; the packed lights kept"), f.stats["plan"]
         assert f.stats["counts"]["recomputed_objects"] < f.stats["counts"]["visible_objects"] \
             or i == 0 and field == "type", f.stats["counts"]
 
