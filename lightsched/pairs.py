@@ -675,9 +675,8 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     mask, bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
     records may be relative to the first camera); out = (object rows, caster masks), light t
     writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
-    a light's rows come in grid order."""
-    hot, lf = lights
-    g_f, dims, cell_start, ext, big_pos = grid
+    a light's rows come ascending (sorted here, per light: the frame keeps them as they
+    are)."""
     box, box_rows = recs[0], recs[2]
     casts = (objects[0], objects[1])
     # Flat: numba's parallel loops take no tuple nested in a tuple of arrays.
@@ -687,24 +686,38 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     out_rows, out_mask = out
     count = np.zeros(rows.shape[0], np.int64)
     for t in nb.prange(rows.shape[0]):
-        j = rows[t]
-        typ = (np.int64(hot[j, 5]) >> 3) & 3
-        n = offsets[t]
-        c = _light_cells(hot, j, g_f, dims, ext)
-        rr = _reach2(hot, j)
-        for x in range(c[0], c[3] + 1):
-            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-            if dxx > rr:
-                continue
-            for y in range(c[1], c[4] + 1):
-                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
-                for v in range(v0, v1):
-                    n = _caster(hot, lf, j, typ, t, walk, casts, vols, v, out_rows, out_mask, n)
-        for b in range(big_pos.shape[0]):
-            n = _caster(hot, lf, j, typ, t, walk, casts, vols, big_pos[b], out_rows, out_mask,
-                        n)
-        count[t] = n - offsets[t]
+        count[t] = _light_casters(t, lights, rows, grid, walk, casts, vols, offsets, out_rows,
+                                  out_mask)
     return count
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _light_casters(t, lights, rows, grid, walk, casts, vols, offsets, out_rows, out_mask):
+    """grid_casters for light rows[t]: its casters written from offsets[t], sorted by
+    object row; returns how many."""
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    j = rows[t]
+    typ = (np.int64(hot[j, 5]) >> 3) & 3
+    n = offsets[t]
+    c = _light_cells(hot, j, g_f, dims, ext)
+    rr = _reach2(hot, j)
+    for x in range(c[0], c[3] + 1):
+        dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+        if dxx > rr:
+            continue
+        for y in range(c[1], c[4] + 1):
+            v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
+            for v in range(v0, v1):
+                n = _caster(hot, lf, j, typ, t, walk, casts, vols, v, out_rows, out_mask, n)
+    for b in range(big_pos.shape[0]):
+        n = _caster(hot, lf, j, typ, t, walk, casts, vols, big_pos[b], out_rows, out_mask, n)
+    a = offsets[t]
+    order = np.argsort(out_rows[a:n]) + a
+    sorted_rows, sorted_mask = out_rows[order], out_mask[order]
+    out_rows[a:n] = sorted_rows
+    out_mask[a:n] = sorted_mask
+    return n - a
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")

@@ -905,50 +905,57 @@ class Scheduler(SceneAPI):
             empty = (np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.uint32))
             return empty, {}, "skipped: no shadow lights"
         found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
-        for t in np.flatnonzero(~recompute):
-            found[t] = cached[int(shadow_rows[t])]  # type: ignore[index]
-        todo = np.flatnonzero(recompute)
-        plan = [f"{n_s - todo.size} kept (light, cameras and objects unchanged)"] \
-            if todo.size < n_s else []
-        if todo.size:
+        todo = []
+        # A few lights: Python lists, not numpy calls of ~1-5 us each on tiny arrays.
+        for t, (row, again) in enumerate(zip(shadow_rows.tolist(), recompute.tolist(),
+                                             strict=True)):
+            if again:
+                todo.append(t)
+            else:
+                found[t] = cached[row]  # type: ignore[index]
+        plan = [f"{n_s - len(todo)} kept (light, cameras and objects unchanged)"] \
+            if len(todo) < n_s else []
+        if todo:
             rows_t = shadow_rows[todo]
             vn, vq, vm, shared = culling_volumes(lights, rows_t, frames, splits,
                                                  self.config.cascade_overlap)
             lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
-            is_dir = lights.type[rows_t] == DIRECTIONAL
-            sun = np.flatnonzero(is_dir)
-            if sun.size:
+            is_dir = (lights.type[rows_t] == DIRECTIONAL).tolist()
+            sun = [i for i, d in enumerate(is_dir) if d]
+            if sun:
                 bits = sweep_casters(lo, hi, casts, objs.mask,
                                      lights.mask[rows_t[sun]].astype(np.int64),
                                      (vn[sun], vq[sun], vm[sun], shared[sun]))
                 for i, t in enumerate(sun):
                     rows = np.flatnonzero(bits[i])
                     found[todo[t]] = (rows, bits[i][rows])
-                plan.append(f"{sun.size} directional: every object against "
+                plan.append(f"{len(sun)} directional: every object against "
                             f"{vm.shape[1]} cascade sweeps")
-            local = np.flatnonzero(~is_dir)
-            if local.size:
+            local = [i for i, d in enumerate(is_dir) if not d]
+            if local:
                 rows_l = rows_t[local].astype(np.int64)
                 vols = (vn[local], vq[local], vm[local], shared[local])
-                parts = [self._grid_casters(lights_packed, rows_l, grid.grid, grid.vis, vols)]
-                nh = 0
-                if grid.shown is None:
+                part = self._grid_casters(lights_packed, rows_l, grid.grid, grid.vis, vols)
+                if grid.shown is not None:
+                    for i, t in enumerate(local):
+                        found[todo[t]] = (part[0][i], part[1][i])
+                    plan.append(f"{len(local)} point/spot: the grid of every object")
+                else:
+                    parts = [part]
                     hidden, nh = self._hidden_casters(lights_packed, rows_l, vols, frame, vis_o)
                     parts += hidden
-                for i, t in enumerate(local):
-                    rows = np.concatenate([p[0][i] for p in parts])
-                    masks = np.concatenate([p[1][i] for p in parts])
-                    order = np.argsort(rows, kind="stable")
-                    found[todo[t]] = (rows[order], masks[order])
-                plan.append(f"{local.size} point/spot: the grid of every object"
-                            if grid.shown is not None else
-                            f"{local.size} point/spot: the grid of visible objects, then a grid "
-                            f"of {nh} invisible casting objects near them")
-        counts = np.array([f[0].size for f in found], np.int64)
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32)
-        masks = np.concatenate([f[1] for f in found]).astype(np.uint32)
-        keep = {int(r): f for r, f in zip(shadow_rows.tolist(), found, strict=True)}
+                    for i, t in enumerate(local):
+                        rows = np.concatenate([p[0][i] for p in parts])
+                        masks = np.concatenate([p[1][i] for p in parts])
+                        order = np.argsort(rows, kind="stable")
+                        found[todo[t]] = (rows[order], masks[order])
+                    plan.append(f"{len(local)} point/spot: the grid of visible objects, then a "
+                                f"grid of {nh} invisible casting objects near them")
+        offsets = np.zeros(n_s + 1, np.int64)
+        np.cumsum([f[0].size for f in found], out=offsets[1:])
+        ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32, copy=False)
+        masks = np.concatenate([f[1] for f in found]).astype(np.uint32, copy=False)
+        keep = dict(zip(shadow_rows.tolist(), found, strict=True))
         return (offsets, ids, masks), keep, "; ".join(plan)
 
     def _hidden_casters(self, lights_packed: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
@@ -985,9 +992,8 @@ class Scheduler(SceneAPI):
         count = grid_casters(lights_packed, rows, grid, recs,
                              (objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
                              vols, offsets, out)
-        ends = offsets[:-1] + count
-        return ([out[0][a:b] for a, b in zip(offsets[:-1], ends, strict=True)],
-                [out[1][a:b] for a, b in zip(offsets[:-1], ends, strict=True)])
+        spans = list(zip(offsets[:-1].tolist(), (offsets[:-1] + count).tolist(), strict=True))
+        return [out[0][a:b] for a, b in spans], [out[1][a:b] for a, b in spans]
 
 
 def _frame_box(box: np.ndarray, frame: tuple[np.ndarray, bool]) -> np.ndarray:
