@@ -48,6 +48,7 @@ from .pairs import (
     candidate_pairs,
     compact_heap,
     compact_light_lists,
+    direct_pairs,
     edit_candidates,
     grid_casters,
     grid_shape,
@@ -71,6 +72,11 @@ from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_cas
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
+# Up to this many (moved or newly visible object, competing point or spot light) tests, an
+# incremental frame tests each such object against every light (pairs.direct_pairs);
+# beyond, a grid of them walked by every light. The walk's cost is per light (~1.1 ms at
+# 10k lights for one object, the grid's pass over the rows included).
+DIRECT_TESTS = 1 << 19
 # With at least this share of the objects visible, the grid holds every object, so a camera
 # move only changes its records' masks and the casters need no second grid of the invisible
 # objects. Below it, the grid holds the visible objects only: a view of a small part of a
@@ -447,21 +453,27 @@ class Scheduler(SceneAPI):
             walk = walked[compete[walked]].astype(np.int32)
             walk = light_order(packed[0], walk, grid.grid[0], grid.grid[1])
             fresh = self._walk(packed, walk, grid, p_params, "pair")
-            # Objects that moved or came into view: their pairs with every light, from a
-            # grid of just them.
-            if fresh_rows.size:
+            # Objects that moved or came into view: their pairs with every light, each
+            # tested against every light when there are few, else from a grid of just them.
+            point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
+            how = "tested against"
+            if not fresh_rows.size:
+                fresh_obj = (np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32)))
+            elif fresh_rows.size * point_rows.size <= DIRECT_TESTS:
+                fresh_obj = self._direct_pairs(fresh_rows, packed, compete, point_rows,
+                                               p_params, rec_frame)
+            else:
                 sub = np.zeros(n, np.bool_)
                 sub[fresh_rows] = True
                 small = self._visible_grid(sub, box, packed, compete, is_dir, rec_frame)
                 every = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
                                     small.grid[0], small.grid[1])
-                fresh_obj = self._walk(packed, every, small, p_params, "small")
-            else:
-                fresh_obj = None
+                fresh_obj = self._group(self._walk(packed, every, small, p_params, "small"), n)
+                how = "from a grid of them walked by"
             plan["pairs"] += (f", walked by {walk.size} changed lights (the other pairs are "
                               f"kept); {fresh_rows.size} moved or newly visible objects get "
-                              f"new pairs from a grid of them walked by {int(compete.sum())} "
-                              f"lights; {left_rows.size} objects left the view")
+                              f"new pairs {how} {int(compete.sum())} lights; "
+                              f"{left_rows.size} objects left the view")
         t = _lap(seconds, "pairs", t)
 
         # Shadowed lights (DESIGN section 2): candidates affect a visible object.
@@ -760,6 +772,23 @@ class Scheduler(SceneAPI):
                     (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
         return start, heap
 
+    def _direct_pairs(self, rows: np.ndarray, packed: tuple[np.ndarray, np.ndarray],
+                      compete: np.ndarray, point_rows: np.ndarray, p_params: np.ndarray,
+                      frame: tuple[np.ndarray, bool]
+                      ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """The pairs of the object ``rows`` (few; ascending) with every competing light, each
+        tested against all of them (pairs.direct_pairs), as (start [N + 1], (P, light
+        row)) grouped by object row: valid at ``rows`` and the row after each, which is all
+        that replace_lists reads of them."""
+        objs = self.objects
+        recs = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
+        bits = recs.view(np.uint32 if frame[1] else np.uint64)
+        visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, rows, rows.size,
+                        (recs, bits), frame[0])
+        dir_rows = np.flatnonzero(compete & (self.lights.type == DIRECTIONAL))
+        return direct_pairs(rows, (recs, bits), packed, compete, point_rows, dir_rows,
+                            p_params, len(objs))
+
     def _candidates(self, old: _Candidates | None, packed: tuple[np.ndarray, np.ndarray],
                     compete: np.ndarray, is_dir: np.ndarray, grid: _Grid, hidden: bool
                     ) -> tuple[_Candidates, int, bool]:
@@ -848,14 +877,17 @@ class Scheduler(SceneAPI):
         return out, walk.size, old is None
 
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
-               shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...], fresh_obj: Any,
+               shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...],
+               fresh_obj: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]],
                fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray
                ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int, np.ndarray]:
         """The cache's pair lists brought up to date, and the object rows to recompute.
 
         Objects holding a pair of a walked light (found by scanning the cache) and objects
         the walk gave pairs keep their other pairs and take the fresh ones; moved or newly
-        visible objects take their new lists; objects that left the view lose theirs."""
+        visible objects take their new lists (``fresh_obj``: grouped by object row, start
+        valid at ``fresh_rows`` and the row after each); objects that left the view lose
+        theirs."""
         n = vis_o.size
         flag = np.zeros(live.size, np.uint8)
         flag[walked] |= WALKED
@@ -870,13 +902,10 @@ class Scheduler(SceneAPI):
         rows1 = np.union1d(fresh_rows, left_rows)
         rewrite[rows1] = False
         rows2 = np.flatnonzero(rewrite)
-        if fresh_obj is not None:
-            o_start, o_pairs = self._group(fresh_obj, n)
-        else:
-            o_start, o_pairs = np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32))
+        o_start, o_pairs = fresh_obj
         # The cache is this frame's to change.
         seg, heap, used = _room(c.seg, c.heap, c.used, int(w_start[-1])
-                                + int(c.seg[rows2, 1].sum()) + int(o_start[-1]))
+                                + int(c.seg[rows2, 1].sum()) + o_pairs[0].size)
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,
                                  (w_start, w_pairs), used))

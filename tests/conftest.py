@@ -51,9 +51,16 @@ def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     """Runs a module's tests with each kind of grid: most test scenes stand in front of the
     camera, so the scheduler's own choice (every object once half are visible) would leave
     the grid of visible objects untested. Full frames of these modules' small scenes take
-    the candidate lists' path where it applies (large scenes only, otherwise)."""
-    old = scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS
+    the candidate lists' path where it applies (large scenes only, otherwise). Objects
+    that move or come into view in an incremental frame get their pairs from a test
+    against every light with the first kind, from a grid of them walked by every light
+    with the second (the scheduler's choice by count, DIRECT_TESTS, would take the tests
+    in every small scene)."""
+    old = (scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS,
+           scheduler.DIRECT_TESTS)
     scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
     scheduler.CANDIDATE_MIN_OBJECTS = 0
+    scheduler.DIRECT_TESTS = scheduler.DIRECT_TESTS if request.param == "every" else -1
     yield request.param
-    scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS = old
+    (scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS,
+     scheduler.DIRECT_TESTS) = old
