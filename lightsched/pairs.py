@@ -756,6 +756,47 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
                 hist[q, o] = d + 1
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def group_few(rows, offsets, count, pair_obj, pair_p):
+    """group_pairs for a few pairs: a stable sort by object row instead of a histogram of
+    every object, whose O(N) clearing and prefix sum took ~0.4 ms at 100k objects for no
+    pair at all. Returns (object row per pair, ascending; (P, light row)), each object's
+    lights in the order of ``rows``; ``start_at`` gives the segments."""
+    n_pairs = 0
+    for t in range(rows.shape[0]):
+        n_pairs += count[t]
+    obj = np.empty(n_pairs, np.int64)
+    p = np.empty(n_pairs)
+    j = np.empty(n_pairs, np.int32)
+    e = 0
+    for t in range(rows.shape[0]):
+        for s in range(offsets[t], offsets[t] + count[t]):
+            obj[e] = pair_obj[s]
+            p[e] = pair_p[s]
+            j[e] = rows[t]
+            e += 1
+    order = np.argsort(obj, kind="mergesort")
+    return obj[order], (p[order], j[order])
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def start_at(rows, obj, n):
+    """start [n + 1] of pairs grouped by object row (``obj``: each pair's row, ascending)
+    at the object ``rows`` (ascending) and the row after each, the only entries written:
+    start[o] = the number of pairs of rows below o."""
+    start = np.empty(n + 1, np.int64)
+    k = 0
+    for r in range(rows.shape[0]):
+        o = rows[r]
+        while k < obj.shape[0] and obj[k] < o:
+            k += 1
+        start[o] = k
+        while k < obj.shape[0] and obj[k] == o:
+            k += 1
+        start[o + 1] = k
+    return start
+
+
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     """The pairs of every object row from its candidate lights (scheduler._Candidates: the

@@ -52,6 +52,7 @@ from .pairs import (
     edit_candidates,
     grid_casters,
     grid_shape,
+    group_few,
     group_pairs,
     left_spheres,
     light_bounds,
@@ -63,6 +64,7 @@ from .pairs import (
     replace_lists,
     scan_pairs,
     spread_lists,
+    start_at,
     visible_objects,
     visible_order,
 )
@@ -77,6 +79,9 @@ BRUTE_FORCE_PAIRS = 1 << 15
 # beyond, a grid of them walked by every light. The walk's cost is per light (~1.1 ms at
 # 10k lights for one object, the grid's pass over the rows included).
 DIRECT_TESTS = 1 << 19
+# An incremental frame whose walked lights have at most this many pairs per object groups
+# them by sorting (pairs.group_few), not with a histogram of every object.
+FEW_PAIRS = 1 / 16
 # With at least this share of the objects visible, the grid holds every object, so a camera
 # move only changes its records' masks and the casters need no second grid of the invisible
 # objects. Below it, the grid holds the visible objects only: a view of a small part of a
@@ -894,17 +899,25 @@ class Scheduler(SceneAPI):
         flag[(live != c.live) | (shadow_of_row != c.shadow_of_row)] |= RESELECT
         holds, kept = (scan_pairs(c.seg, c.heap[1], flag, WALKED) if flag.any()
                        else (np.zeros(n, np.uint8), np.zeros(0, np.int64)))
-        w_start, w_pairs = self._group(fresh, n)
-        rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
+        few = int(fresh[2].sum()) <= FEW_PAIRS * n
+        if few:
+            w_obj, w_pairs = group_few(*fresh)
+            rewrite = (holds & WALKED) != 0
+            rewrite[w_obj] = True
+        else:
+            w_start, w_pairs = self._group(fresh, n)
+            rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
         mode = np.full(n, 2, np.int8)
         mode[fresh_rows] = 1
         mode[left_rows] = 0
         rows1 = np.union1d(fresh_rows, left_rows)
         rewrite[rows1] = False
         rows2 = np.flatnonzero(rewrite)
+        if few:
+            w_start = start_at(rows2, w_obj, n)
         o_start, o_pairs = fresh_obj
         # The cache is this frame's to change.
-        seg, heap, used = _room(c.seg, c.heap, c.used, int(w_start[-1])
+        seg, heap, used = _room(c.seg, c.heap, c.used, w_pairs[0].size
                                 + int(c.seg[rows2, 1].sum()) + o_pairs[0].size)
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,

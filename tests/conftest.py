@@ -54,13 +54,17 @@ def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     the candidate lists' path where it applies (large scenes only, otherwise). Objects
     that move or come into view in an incremental frame get their pairs from a test
     against every light with the first kind, from a grid of them walked by every light
-    with the second (the scheduler's choice by count, DIRECT_TESTS, would take the tests
-    in every small scene)."""
-    old = (scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS,
-           scheduler.DIRECT_TESTS)
+    with the second; and the pairs of the lights an incremental frame walks again are
+    grouped by sorting with the first, by a histogram of every object with the second
+    (the scheduler chooses both by counts, DIRECT_TESTS and FEW_PAIRS, which small scenes
+    would not cross)."""
+    names = ("EVERY_OBJECT_SHARE", "CANDIDATE_MIN_OBJECTS", "DIRECT_TESTS", "FEW_PAIRS")
+    old = {name: getattr(scheduler, name) for name in names}
+    every = request.param == "every"
     scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
     scheduler.CANDIDATE_MIN_OBJECTS = 0
-    scheduler.DIRECT_TESTS = scheduler.DIRECT_TESTS if request.param == "every" else -1
+    scheduler.DIRECT_TESTS = old["DIRECT_TESTS"] if every else -1
+    scheduler.FEW_PAIRS = math.inf if every else -1
     yield request.param
-    (scheduler.EVERY_OBJECT_SHARE, scheduler.CANDIDATE_MIN_OBJECTS,
-     scheduler.DIRECT_TESTS) = old
+    for name, value in old.items():
+        setattr(scheduler, name, value)
