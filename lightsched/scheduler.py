@@ -74,14 +74,18 @@ from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_cas
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
-# Up to this many (moved or newly visible object, competing point or spot light) tests, an
-# incremental frame tests each such object against every light (pairs.direct_pairs);
-# beyond, a grid of them walked by every light. The walk's cost is per light (~1.1 ms at
-# 10k lights for one object, the grid's pass over the rows included).
-DIRECT_TESTS = 1 << 19
+# An incremental frame tests the objects that moved or came into view against every
+# competing point or spot light (pairs.direct_pairs) while those tests number at most this
+# many per light plus one per object row; beyond, a grid of them walked by every light.
+# The walk costs about that much: ~80 ns a light (cell ranges, runs) and ~3 ns an object
+# row (the grid's pass over the rows), where a test costs ~3.7 ns (at (10k, 1k), 100
+# objects against 1000 lights: 0.37 ms; at (100k, 10k), one object: the pairs stage
+# 1.2 -> 0.2 ms).
+DIRECT_TESTS_PER_LIGHT = 24
 # An incremental frame whose walked lights have at most this many pairs per object groups
-# them by sorting (pairs.group_few), not with a histogram of every object.
-FEW_PAIRS = 1 / 16
+# them by sorting (pairs.group_few, ~60 ns a pair), not with a histogram of every object
+# (~3 ns an object: ~0.3 ms at 100k objects, for no pair too).
+FEW_PAIRS = 1 / 32
 # With at least this share of the objects visible, the grid holds every object, so a camera
 # move only changes its records' masks and the casters need no second grid of the invisible
 # objects. Below it, the grid holds the visible objects only: a view of a small part of a
@@ -460,13 +464,13 @@ class Scheduler(SceneAPI):
             fresh = self._walk(packed, walk, grid, p_params, "pair")
             # Objects that moved or came into view: their pairs with every light, each
             # tested against every light when there are few, else from a grid of just them.
-            point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
             how = "tested against"
+            n_point = int(np.count_nonzero(compete & ~is_dir)) if fresh_rows.size else 0
             if not fresh_rows.size:
                 fresh_obj = (np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32)))
-            elif fresh_rows.size * point_rows.size <= DIRECT_TESTS:
-                fresh_obj = self._direct_pairs(fresh_rows, packed, compete, point_rows,
-                                               p_params, rec_frame)
+            elif fresh_rows.size * n_point <= DIRECT_TESTS_PER_LIGHT * n_point + n:
+                fresh_obj = self._direct_pairs(fresh_rows, packed, compete, is_dir, p_params,
+                                               rec_frame)
             else:
                 sub = np.zeros(n, np.bool_)
                 sub[fresh_rows] = True
@@ -778,7 +782,7 @@ class Scheduler(SceneAPI):
         return start, heap
 
     def _direct_pairs(self, rows: np.ndarray, packed: tuple[np.ndarray, np.ndarray],
-                      compete: np.ndarray, point_rows: np.ndarray, p_params: np.ndarray,
+                      compete: np.ndarray, is_dir: np.ndarray, p_params: np.ndarray,
                       frame: tuple[np.ndarray, bool]
                       ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """The pairs of the object ``rows`` (few; ascending) with every competing light, each
@@ -790,7 +794,8 @@ class Scheduler(SceneAPI):
         bits = recs.view(np.uint32 if frame[1] else np.uint64)
         visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, rows, rows.size,
                         (recs, bits), frame[0])
-        dir_rows = np.flatnonzero(compete & (self.lights.type == DIRECTIONAL))
+        point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
+        dir_rows = np.flatnonzero(compete & is_dir)
         return direct_pairs(rows, (recs, bits), packed, compete, point_rows, dir_rows,
                             p_params, len(objs))
 

@@ -56,14 +56,15 @@ def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     against every light with the first kind, from a grid of them walked by every light
     with the second; and the pairs of the lights an incremental frame walks again are
     grouped by sorting with the first, by a histogram of every object with the second
-    (the scheduler chooses both by counts, DIRECT_TESTS and FEW_PAIRS, which small scenes
-    would not cross)."""
-    names = ("EVERY_OBJECT_SHARE", "CANDIDATE_MIN_OBJECTS", "DIRECT_TESTS", "FEW_PAIRS")
+    (the scheduler chooses both by counts, DIRECT_TESTS_PER_LIGHT and FEW_PAIRS, which
+    small scenes would not cross)."""
+    names = ("EVERY_OBJECT_SHARE", "CANDIDATE_MIN_OBJECTS", "DIRECT_TESTS_PER_LIGHT",
+             "FEW_PAIRS")
     old = {name: getattr(scheduler, name) for name in names}
     every = request.param == "every"
     scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
     scheduler.CANDIDATE_MIN_OBJECTS = 0
-    scheduler.DIRECT_TESTS = old["DIRECT_TESTS"] if every else -1
+    scheduler.DIRECT_TESTS_PER_LIGHT = 1e18 if every else -1e18
     scheduler.FEW_PAIRS = math.inf if every else -1
     yield request.param
     for name, value in old.items():
