@@ -819,11 +819,14 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     start of its room) and returns the records its rooms take."""
     c_seg, c_j = cands
     box, bits = recs
-    hot = lights[0]
+    hot, lf = lights
     o_seg, o_p, o_j = out
+    model = int(params[0])
     n = c_seg.shape[0]
     n_dir = dir_rows.shape[0]
-    vector = _vector_rows(params, box, lights)
+    # candidate_run reads whole 8-word rows.
+    vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
+              and lf.shape[1] == 8)
     far = hot.nbytes > PREFETCH_BYTES
     room = 0
     for o in range(n):
@@ -837,8 +840,24 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
             if far and ahead < n and bits[ahead, 6] != 0:
                 for t in range(c_seg[ahead, 0], c_seg[ahead, 0] + c_seg[ahead, 1]):
                     prefetch_row(hot, c_j[t])
-            m = _record_pairs(o, recs, lights, compete, c_j, c_seg[o, 0],
-                              c_seg[o, 0] + c_seg[o, 1], dir_rows, o_p, o_j, m, params, vector)
+            ob = np.int64(bits[o, 6])
+            # An object out of view (mask 0 in its record) keeps its list but pairs with none.
+            a = c_seg[o, 0]
+            b = a + (c_seg[o, 1] if ob != 0 else 0)
+            if vector and b > a:
+                # Float64 records: eight candidates a step in vector code (-1: float32).
+                end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m)
+                if end >= 0:
+                    a = b
+                    m = end
+            m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, (o_p, o_j), m,
+                                  params)
+            for d in range(n_dir):
+                j = dir_rows[d]
+                if ob & np.int64(hot[j, 4]) != 0:
+                    o_p[m] = hot[j, 6] + hot[j, 7]
+                    o_j[m] = j
+                    m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
     return room
 
@@ -852,13 +871,17 @@ def _vector_rows(params, box, lights):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _record_pairs(o, recs, lights, compete, c_j, a, b, dir_rows, o_p, o_j, m, params, vector):
+def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params, vector):
     """The pairs of record o of recs = (boxes, integer view) with the candidate light rows
-    c_j[a:b] and the directional ``dir_rows``, appended from m to (o_p, o_j); returns the
-    new end. ``vector``: the records and light rows are 8-word float64 rows under the
-    contribution model, which simd.candidate_run takes eight candidates at a time."""
+    c_j[a:b] (cands = (c_j, a, b)) and the directional ``dir_rows``, appended from m to
+    (o_p, o_j); returns the new end. ``vector``: the records and light rows are 8-word
+    float64 rows under the contribution model, which simd.candidate_run takes eight
+    candidates at a time. candidate_pairs keeps its own copy of these lines: calling this
+    from its parallel loop, a full (100k, 10k) frame's candidates' pass took ~1.3 ms more
+    (paired, twice), though not on captured inputs."""
     box, bits = recs
     hot, lf = lights
+    c_j, a, b = cands
     ob = np.int64(bits[o, 6])
     # An object out of view (mask 0 in its record) keeps its list but pairs with none.
     if ob == 0:
@@ -898,7 +921,7 @@ def direct_pairs(rows, recs, lights, compete, point_rows, dir_rows, params, n):
     m = 0
     for r in range(rows.shape[0]):
         start[rows[r]] = m
-        m = _record_pairs(r, recs, lights, compete, point_rows, 0, point_rows.shape[0],
+        m = _record_pairs(r, recs, lights, compete, (point_rows, 0, point_rows.shape[0]),
                           dir_rows, o_p, o_j, m, params, vector)
         start[rows[r] + 1] = m
     return start, (o_p[:m], o_j[:m])
