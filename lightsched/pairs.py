@@ -85,6 +85,7 @@ MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
+SCAN_LANES = 8               # pairs scan_pairs reads per object in a loop of fixed length
 # candidate_pairs asks for the light rows of the object this many rows ahead, once
 # light_hot is over PREFETCH_BYTES: an object's candidates are rows of it at random, which
 # the records streaming through L2 push out (on captured inputs, 2 threads: (100k, 10k)
@@ -1309,19 +1310,33 @@ def scan_pairs(seg, heap_j, light_flag, drop):
     so an incremental frame finds the objects that hold a pair of a changed light, and
     the number of its pairs whose light's flag has no ``drop`` bit: the pairs
     ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
-    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects)."""
+    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects).
+
+    Objects hold a few pairs each (4.4 on average in the city, 0 to 16), so a loop over
+    each list's length mispredicts its exit about once an object. The first SCAN_LANES
+    pairs are read in a loop of fixed length instead, the lanes past the end reading the
+    last pair again and counting nothing: on a lights10 frame's captured inputs at (100k,
+    10k), 1.03 -> 0.81 ms (4 lanes 0.93, 12 lanes 1.08)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
     kept = np.empty(n, np.int64)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+            a = seg[o, 0]
+            size = seg[o, 1]
             acc = 0
             keep = 0
-            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                f = light_flag[heap_j[t]]
-                acc |= f
-                keep += (f & drop) == 0
+            if size > 0:
+                last = a + size - 1
+                for k in range(SCAN_LANES):
+                    f = light_flag[heap_j[min(a + k, last)]]
+                    acc |= f
+                    keep += ((f & drop) == 0) & (k < size)
+                for t in range(a + SCAN_LANES, a + size):
+                    f = light_flag[heap_j[t]]
+                    acc |= f
+                    keep += (f & drop) == 0
             out[o] = acc
             kept[o] = keep
     return out, kept
