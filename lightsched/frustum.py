@@ -97,49 +97,72 @@ def ball_in_frustum(plane_n, plane_p, cam, x0, x1, x2, radius):
     return True
 
 
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def box_in_frustum(plane_n, plane_p, cam, lo, hi):
-    """The conservative AABB test: the corner farthest along n has distance >= 0."""
-    for j in range(6):
-        n = plane_n[cam, j]
-        c0 = hi[0] if n[0] >= 0.0 else lo[0]
-        c1 = hi[1] if n[1] >= 0.0 else lo[1]
-        c2 = hi[2] if n[2] >= 0.0 else lo[2]
-        if signed_distance(n, plane_p[cam, j], c0, c1, c2) < 0.0:
-            return False
-    return True
+# objects_visible tests this many boxes at a time, copied into columns (24 KB: L1).
+VISIBLE_BLOCK = 512
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
-    """visible[o] iff o's AABB is in at least one camera frustum; also returns the
+    """visible[o] iff o's AABB is in at least one camera frustum: for every plane of it,
+    the box's corner farthest along the plane's normal n (hi on an axis where n >= 0, lo
+    elsewhere) is at a signed distance >= 0 (the conservative test). Also returns the
     bounding box of the visible objects (lo, hi) [6], +-inf when none is visible, from
-    per-chunk boxes so the reduction stays parallel."""
+    per-block boxes so the reduction stays parallel.
+
+    A block of boxes is copied into six columns, then each plane runs over the block with
+    its farthest corner's columns chosen once: a loop without branches over contiguous
+    columns, which LLVM vectorises (it does not over [N, 3] rows tested box by box with an
+    exit at the first failed plane). City (100k, 10k), one camera, 98% visible: 0.83 ->
+    0.37 ms on two threads, 1.65 -> 0.71 on one (bench/RESULTS.md)."""
     n = bounds_min.shape[0]
     out = np.zeros(n, np.bool_)
-    n_chunks = (n + 1023) // 1024
-    boxes = np.empty((n_chunks, 6))
-    for ch in nb.prange(n_chunks):
+    n_blocks = (n + VISIBLE_BLOCK - 1) // VISIBLE_BLOCK
+    boxes = np.empty((n_blocks, 6))
+    for blk in nb.prange(n_blocks):
+        a0 = blk * VISIBLE_BLOCK
+        size = min(n, a0 + VISIBLE_BLOCK) - a0
+        # Columns lo x, y, z, hi x, y, z: the corner along n >= 0 is column a + 3.
+        col = np.empty((6, VISIBLE_BLOCK))
+        ok = np.empty(VISIBLE_BLOCK, np.bool_)
+        vis = np.zeros(VISIBLE_BLOCK, np.bool_)
+        for i in range(size):
+            for a in range(3):
+                col[a, i] = bounds_min[a0 + i, a]
+                col[3 + a, i] = bounds_max[a0 + i, a]
+        for cam in range(plane_n.shape[0]):
+            ok[:size] = True
+            for j in range(6):
+                n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
+                q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
+                c0 = 3 if n0 >= 0.0 else 0
+                c1 = 4 if n1 >= 0.0 else 1
+                c2 = 5 if n2 >= 0.0 else 2
+                for i in range(size):
+                    # signed_distance's sum, term by term.
+                    d = (n0 * (col[c0, i] - q0) + n1 * (col[c1, i] - q1)
+                         + n2 * (col[c2, i] - q2))
+                    ok[i] = ok[i] & (d >= 0.0)
+            for i in range(size):
+                vis[i] = vis[i] | ok[i]
+        b = np.empty(6)
         for a in range(3):
-            boxes[ch, a] = np.inf
-            boxes[ch, 3 + a] = -np.inf
-        for o in range(ch * 1024, min(n, (ch + 1) * 1024)):
-            for cam in range(plane_n.shape[0]):
-                if box_in_frustum(plane_n, plane_p, cam, bounds_min[o], bounds_max[o]):
-                    out[o] = True
-                    break
-            if out[o]:
-                for a in range(3):
-                    boxes[ch, a] = min(boxes[ch, a], bounds_min[o, a])
-                    boxes[ch, 3 + a] = max(boxes[ch, 3 + a], bounds_max[o, a])
+            b[a] = np.inf
+            b[3 + a] = -np.inf
+        for i in range(size):
+            v = vis[i]
+            out[a0 + i] = v
+            for a in range(3):
+                b[a] = min(b[a], col[a, i] if v else np.inf)
+                b[3 + a] = max(b[3 + a], col[3 + a, i] if v else -np.inf)
+        boxes[blk] = b
     b = np.empty(6)
     for a in range(3):
         b[a] = np.inf
         b[3 + a] = -np.inf
-    for ch in range(n_chunks):
+    for blk in range(n_blocks):
         for a in range(3):
-            b[a] = min(b[a], boxes[ch, a])
-            b[3 + a] = max(b[3 + a], boxes[ch, 3 + a])
+            b[a] = min(b[a], boxes[blk, a])
+            b[3 + a] = max(b[3 + a], boxes[blk, 3 + a])
     return out, b
 
 

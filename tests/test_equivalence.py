@@ -165,6 +165,35 @@ def test_one_frame_matches_oracle(sc):
 
 
 @examples(1.0)
+@given(cams=camera_list(), seed=st.integers(0, 2**32 - 1), n=st.sampled_from([0, 1, 511, 1300]))
+def test_object_visibility_matches_oracle(cams, seed, n):
+    """frustum.objects_visible tests blocks of boxes plane by plane, in columns: the same
+    visibility as the oracle's corner test box by box, across block ends, with zero-extent
+    boxes and integer coordinates on the planes of an axis-aligned camera (normals with zero
+    components), and the same bounding box of the visible objects."""
+    from lightsched.frustum import CameraFrames, objects_visible
+
+    rng = np.random.default_rng(seed)
+    cams = [*cams, ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0.0, 1.0]),
+                             up=np.array([0.0, 1.0, 0.0]), fov_y=math.pi / 2, aspect=1.0,
+                             near=1.0, far=20.0, id=len(cams))]
+    centre = np.where(rng.random((n, 3)) < 0.5, rng.integers(-25, 26, (n, 3)),
+                      rng.uniform(-30.0, 30.0, (n, 3))) + [0.0, 0.0, 10.0]
+    half = np.where(rng.random((n, 3)) < 0.3, 0.0, rng.uniform(0.0, 4.0, (n, 3)))
+    lo, hi = centre - half, centre + half
+    f = CameraFrames(cams)
+    vis, box = objects_visible(lo, hi, f.plane_n, f.plane_p)
+    planes = [ref.CameraFrame(c).planes for c in cams]
+    want = np.array([any(ref.aabb_in_planes(p, tuple(lo[o]), tuple(hi[o])) for p in planes)
+                     for o in range(n)], bool)
+    assert np.array_equal(vis, want)
+    if want.any():
+        assert np.array_equal(box, np.concatenate([lo[want].min(0), hi[want].max(0)]))
+    else:
+        assert np.array_equal(box, [np.inf] * 3 + [-np.inf] * 3)
+
+
+@examples(1.0)
 @given(sc=scenes())
 def test_stateless_schedule_matches_oracle(sc):
     lk, ok = as_kwargs(sc["lights"]), as_kwargs(sc["objects"], kind="objects")
