@@ -13,8 +13,11 @@ A full frame computes every pair; an incremental one keeps the last frame's pair
 (per object its (P, light row) pairs, pairs.py) and recomputes only what changed:
 - lights whose fields changed, or that entered or left the view, walk the grid of objects
   again; the objects that held a pair of theirs or get one now rewrite their lists;
-- objects that moved or came into view get new lists against every light (a small grid of
-  just them, walked by every light); objects that left the view lose theirs;
+- objects that moved or came into view get new lists against every light (each tested
+  against every light when they are few, else against the lights of the cells its box
+  overlaps in a grid of the lights, kept while no light changes); in a grid of every
+  object their records are rewritten where they are while each box stays within reach of
+  its cell; objects that left the view lose theirs;
 - the object pass runs on those objects, on the objects holding a pair of a light whose
   shadow map or "skip" status changed, and on the objects still fading; the other rows of
   the outputs are the last frame's (shared outright when no row changed).
@@ -51,15 +54,18 @@ from .pairs import (
     direct_pairs,
     edit_candidates,
     grid_casters,
+    grid_pairs,
     grid_shape,
     group_few,
     group_pairs,
     left_spheres,
     light_bounds,
+    light_grid,
     light_lists,
     light_order,
     light_pass,
     list_room,
+    move_records,
     object_pass,
     replace_lists,
     scan_pairs,
@@ -76,11 +82,12 @@ from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_cas
 BRUTE_FORCE_PAIRS = 1 << 15
 # An incremental frame tests the objects that moved or came into view against every
 # competing point or spot light (pairs.direct_pairs) while those tests number at most this
-# many per light plus one per object row; beyond, a grid of them walked by every light.
-# The walk costs about that much: ~80 ns a light (cell ranges, runs) and ~3 ns an object
-# row (the grid's pass over the rows), where a test costs ~3.7 ns (at (10k, 1k), 100
-# objects against 1000 lights: 0.37 ms; at (100k, 10k), one object: the pairs stage
-# 1.2 -> 0.2 ms).
+# many per light plus one per object row; beyond, each against the lights of the cells its
+# box overlaps in a grid of the lights (pairs.light_grid, grid_pairs). A test costs ~3.7
+# ns (at (10k, 1k), 100 objects against 1000 lights: 0.37 ms; at (100k, 10k), one object:
+# the pairs stage 1.2 -> 0.2 ms). The grid of 10k lights takes ~0.9 ms to make, kept while
+# no light changes, and ~0.4 us an object (pairs.light_grid); before it, a grid of the
+# moved objects walked by every light took ~2.8 ms for 1000 of them at (100k, 10k).
 DIRECT_TESTS_PER_LIGHT = 24
 # An incremental frame whose walked lights have at most this many pairs per object groups
 # them by sorting (pairs.group_few, ~60 ns a pair), not with a histogram of every object
@@ -215,6 +222,8 @@ class _Cache:
     # "fast" precision, the first camera's position when they were made.
     origin: np.ndarray
     cands: _Candidates | None = None
+    # The grid of the point and spot lights (pairs.light_grid) while they do not change.
+    light_grid: tuple | None = None
 
 
 class Scheduler(SceneAPI):
@@ -455,7 +464,8 @@ class Scheduler(SceneAPI):
             fresh = self._walk(packed, rows, grid, p_params, "pair")
             plan["pairs"] += f", walked by {rows.size} lights"
             walked = np.zeros(0, np.int64)
-        else:
+        light_cells = None
+        if not full:
             # Lights that changed or entered or left the competition have their pairs
             # replaced: they walk the grid again (the visible ones).
             walked = np.union1d(lrows, np.flatnonzero(compete != c.compete))
@@ -463,22 +473,24 @@ class Scheduler(SceneAPI):
             walk = light_order(packed[0], walk, grid.grid[0], grid.grid[1])
             fresh = self._walk(packed, walk, grid, p_params, "pair")
             # Objects that moved or came into view: their pairs with every light, each
-            # tested against every light when there are few, else from a grid of just them.
+            # tested against every light when there are few, else against the lights of
+            # the cells of a grid of the lights that their box overlaps.
             how = "tested against"
             n_point = int(np.count_nonzero(compete & ~is_dir)) if fresh_rows.size else 0
+            if lrows.size == 0:
+                light_cells = c.light_grid
             if not fresh_rows.size:
                 fresh_obj = (np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32)))
             elif fresh_rows.size * n_point <= DIRECT_TESTS_PER_LIGHT * n_point + n:
-                fresh_obj = self._direct_pairs(fresh_rows, packed, compete, is_dir, p_params,
-                                               rec_frame)
+                fresh_obj = self._fresh_pairs(fresh_rows, packed, compete, is_dir, p_params,
+                                              rec_frame, None)
             else:
-                sub = np.zeros(n, np.bool_)
-                sub[fresh_rows] = True
-                small = self._visible_grid(sub, box, packed, compete, is_dir, rec_frame)
-                every = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
-                                    small.grid[0], small.grid[1])
-                fresh_obj = self._group(self._walk(packed, every, small, p_params, "small"), n)
-                how = "from a grid of them walked by"
+                how = "from the cells of a grid of"
+                if light_cells is None:
+                    how = "from the cells of a new grid of"
+                    light_cells = light_grid(packed[0], np.flatnonzero(~is_dir).astype(np.int32))
+                fresh_obj = self._fresh_pairs(fresh_rows, packed, compete, is_dir, p_params,
+                                              rec_frame, light_cells)
             plan["pairs"] += (f", walked by {walk.size} changed lights (the other pairs are "
                               f"kept); {fresh_rows.size} moved or newly visible objects get "
                               f"new pairs {how} {int(compete.sum())} lights; "
@@ -599,7 +611,8 @@ class Scheduler(SceneAPI):
             frames=frames, splits=splits, vis_l=vis_l, vis_o=vis_o, box=box, compete=compete,
             packed=packed, grid=grid, seg=seg, heap=heap, used=used, live=live,
             shadow_of_row=shadow_of_row, fading=fading, shadows_settled=settled, frame=frame,
-            casters=kept_casters, origin=origin, cands=cands)
+            casters=kept_casters, origin=origin, cands=cands,
+            light_grid=light_cells)
         if not full:
             why = [f"{lrows.size} lights and {orows.size} objects changed",
                    "cameras " + ("unchanged" if same_cams else "moved")]
@@ -687,18 +700,30 @@ class Scheduler(SceneAPI):
                     packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                     is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> tuple[_Grid, bool]:
         """The grid of every object, and whether it was kept: the last frame's serves while
-        no object changed (``orows`` empty), the records' origin is the same and its cell
-        edge is within CELL_SLACK of the one the lights ask for; then only the records of
-        the objects whose visibility changed get their mask (or 0) again."""
+        the records' origin is the same, its cell edge is within CELL_SLACK of the one the
+        lights ask for, and every object that changed (``orows``) still lies where the
+        grid's walks look for its record (pairs.move_records, which rewrites those records
+        in place); then the records of the objects whose visibility changed get their mask
+        (or 0) again."""
         objs = self.objects
         n = len(objs)
         kept = (c is not None and c.grid.shown is not None and orows is not None
-                and orows.size == 0 and np.array_equal(frame[0], c.origin))
-        # Axis by axis: numpy's min over axis 0 of an [N, 3] array took 2.6 ms at 100k
-        # objects, a strided column 0.04.
-        box = c.grid.box if kept else np.array(
-            [objs.bounds_min[:, a].min() for a in range(3)]
-            + [objs.bounds_max[:, a].max() for a in range(3)])
+                and np.array_equal(frame[0], c.origin))
+        moved = "the objects did not change"
+        if kept and orows.size:
+            g = c.grid
+            kept = move_records(objs.bounds_min, objs.bounds_max, orows,
+                                np.where(vis_o[orows], objs.mask[orows], 0), g.grid,
+                                g.vis[:2], g.pos_of, frame)
+            moved = f"{orows.size} changed objects' records rewritten in place"
+
+        def every_box() -> np.ndarray:
+            # Axis by axis: numpy's min over axis 0 of an [N, 3] array took 2.6 ms at 100k
+            # objects, a strided column 0.04.
+            return np.array([objs.bounds_min[:, a].min() for a in range(3)]
+                            + [objs.bounds_max[:, a].max() for a in range(3)])
+
+        box = c.grid.box if kept else every_box()
         # The competing lights' radii set the cell edge: the same ones ask for the same grid
         # (their median is ~0.1 ms at 10k lights).
         same_radii = (kept and np.array_equal(compete, c.compete)
@@ -713,6 +738,10 @@ class Scheduler(SceneAPI):
             else:
                 ratio = shape[0][3] / g_f[3]  # kept edge over the edge asked for
                 kept = 1 / CELL_SLACK <= ratio <= CELL_SLACK
+            if not kept and orows.size:
+                # The kept box missed the objects that moved.
+                box = every_box()
+                shape = _grid_shape(n, box, packed, compete, is_dir, frame)
         if kept:
             g = c.grid
             rows = (np.zeros(0, np.int64) if vis_o is g.shown
@@ -720,8 +749,7 @@ class Scheduler(SceneAPI):
             if rows.size:
                 g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
             plan = g.plan.split(" (kept", 1)[0] + (
-                f" (kept: the objects did not change; {rows.size} records' visibility "
-                "updated)")
+                f" (kept: {moved}; {rows.size} records' visibility updated)")
             return _Grid(g.grid, g.vis, plan, vis_o, g.pos_of, box), True
         assert shape is not None
         g_f, dims, plan = shape
@@ -781,21 +809,25 @@ class Scheduler(SceneAPI):
                     (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
         return start, heap
 
-    def _direct_pairs(self, rows: np.ndarray, packed: tuple[np.ndarray, np.ndarray],
-                      compete: np.ndarray, is_dir: np.ndarray, p_params: np.ndarray,
-                      frame: tuple[np.ndarray, bool]
-                      ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-        """The pairs of the object ``rows`` (few; ascending) with every competing light, each
-        tested against all of them (pairs.direct_pairs), as (start [N + 1], (P, light
-        row)) grouped by object row: valid at ``rows`` and the row after each, which is all
-        that replace_lists reads of them."""
+    def _fresh_pairs(self, rows: np.ndarray, packed: tuple[np.ndarray, np.ndarray],
+                     compete: np.ndarray, is_dir: np.ndarray, p_params: np.ndarray,
+                     frame: tuple[np.ndarray, bool], light_cells: tuple | None
+                     ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """The pairs of the object ``rows`` (ascending) with every competing light, each
+        object tested against all of them (pairs.direct_pairs) or, given a grid of the
+        lights, against those of the cells its box overlaps (pairs.grid_pairs), as (start
+        [N + 1], (P, light row)) grouped by object row: valid at ``rows`` and the row after
+        each, which is all that replace_lists reads of them."""
         objs = self.objects
         recs = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
         bits = recs.view(np.uint32 if frame[1] else np.uint64)
         visible_objects(objs.bounds_min, objs.bounds_max, objs.mask, rows, rows.size,
                         (recs, bits), frame[0])
-        point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
         dir_rows = np.flatnonzero(compete & is_dir)
+        if light_cells is not None:
+            return grid_pairs(rows, (recs, bits), packed, compete, light_cells, dir_rows,
+                              p_params, len(objs))
+        point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
         return direct_pairs(rows, (recs, bits), packed, compete, point_rows, dir_rows,
                             p_params, len(objs))
 

@@ -138,11 +138,14 @@ def _paths(config: Config) -> None:
             if prev is not None:
                 changed_rows(prev, f, tuple(PER_OBJECT))
             prev = f
-        # Objects moved: their pairs from a grid of just them.
-        s.update_objects(id=objects["id"][::20],
-                         bounds_min=objects["bounds_min"][::20] + 0.5,
-                         bounds_max=objects["bounds_max"][::20] + 0.5)
-        s.frame(cams, dt=1 / 60)
+        # Objects moved: a few tested against every light, then more against the lights
+        # of their cells in a grid of the lights; their records rewritten in the grid of
+        # every object.
+        for few in (20, 5):
+            s.update_objects(id=objects["id"][::few],
+                             bounds_min=objects["bounds_min"][::few] + 0.5 / few,
+                             bounds_max=objects["bounds_max"][::few] + 0.5 / few)
+            s.frame(cams, dt=1 / 60)
         s.frame(cams, dt=1 / 60)
     s.frame(wide, dt=1 / 60, cut=True)
     s.remove_lights(id=ids[:5])

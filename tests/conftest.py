@@ -53,8 +53,8 @@ def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     the grid of visible objects untested. Full frames of these modules' small scenes take
     the candidate lists' path where it applies (large scenes only, otherwise). Objects
     that move or come into view in an incremental frame get their pairs from a test
-    against every light with the first kind, from a grid of them walked by every light
-    with the second; and the pairs of the lights an incremental frame walks again are
+    against every light with the first kind, from a grid of the lights with the second;
+    and the pairs of the lights an incremental frame walks again are
     grouped by sorting with the first, by a histogram of every object with the second
     (the scheduler chooses both by counts, DIRECT_TESTS_PER_LIGHT and FEW_PAIRS, which
     small scenes would not cross)."""

@@ -119,13 +119,16 @@ def test_changed_lights_recompute_only_the_objects_they_touch(field):
 
 
 def test_moved_objects_get_new_pairs_against_every_light(grid_kind):
-    # Each object tested against every light, or a grid of them walked by every light
-    # (conftest.grid_kind sets which).
-    how = "tested against" if grid_kind == "every" else "from a grid of them walked by"
+    # Each object tested against every light, or against the lights of its cells in a
+    # grid of the lights, made in the first frame that needs it and kept while no light
+    # changes (conftest.grid_kind sets which).
+    how = ["tested against"] * 3 if grid_kind == "every" else [
+        "from the cells of a new grid of", "from the cells of a grid of",
+        "from the cells of a grid of"]
     t, _, objects, cams = _twin(ls.Config(max_lights=4, shadow_budget=4))
     t.frame(cams)
     rng = np.random.default_rng(2)
-    for _ in range(3):
+    for i in range(3):
         rows = rng.choice(250, 15, replace=False)
         d = rng.normal(0, 3, (15, 3))
         objects["bounds_min"][rows] += d
@@ -134,7 +137,7 @@ def test_moved_objects_get_new_pairs_against_every_light(grid_kind):
                          bounds_max=objects["bounds_max"][rows])
         f, _ = t.frame(cams, dt=0.05)
         assert _plan(f).startswith("incremental"), f.stats["plan"]
-        assert re.search(r"\d+ moved or newly visible objects get new pairs " + how,
+        assert re.search(r"\d+ moved or newly visible objects get new pairs " + how[i] + " ",
                          f.stats["plan"]["pairs"]), f.stats["plan"]["pairs"]
     # casts_shadows alone changes casters, not pairs.
     rows = rng.choice(250, 20, replace=False)
@@ -481,6 +484,47 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     else:
         assert updated == [None] * 7, t.plans
         assert "invisible casting objects" in ff.stats["plan"]["casters"]
+
+
+@pytest.mark.parametrize("precision", ["exact", "fast"])
+def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, precision):
+    """Objects that move a little keep their place in a grid of every object, their records
+    rewritten (pairs.move_records), while each box stays inside its cell's slab widened by
+    the grid's largest half-extent; a box that leaves it, or one moved past the grid's
+    edge, makes the grid again. Every frame equals a full frame's, and in exact precision
+    the oracle's (test_fast_precision holds "fast" to its error bound)."""
+    scene = city(3_000, 300, seed=6, shadow_fraction=0.1)
+    cfg = ls.Config(max_lights=4, shadow_budget=8, precision=precision)
+    t, p = Twin(cfg), _Pair(cfg)
+    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
+    for s in (t, p):
+        s.set_lights(**scene.lights)
+        s.set_objects(**objects)
+    cams = list(scene.cameras)
+    rng = np.random.default_rng(6)
+    kept = []
+    for i, step in enumerate([0.0, 0.3, 0.3, 0.3, 40.0, 0.3, 0.0, 1e4, 0.3]):
+        if step:
+            rows = rng.choice(3_000, 60, replace=False)
+            if step > 1e3:
+                rows = rows[:1]  # far past every other object: beyond the grid's edge
+            d = rng.normal(0.0, step, (rows.size, 3))
+            objects["bounds_min"][rows] += d
+            objects["bounds_max"][rows] += d
+            for s in (t, p):
+                s.update_objects(id=objects["id"][rows], bounds_min=objects["bounds_min"][rows],
+                                 bounds_max=objects["bounds_max"][rows])
+        fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i} ({step})")
+        if precision == "exact":
+            ff, _ = t.frame(cams, dt=1 / 60)
+            frames_identical(fa, ff, f"frame {i} ({step})")
+        kept.append("records rewritten in place" in fa.stats["plan"]["pairs"])
+    assert not t.diverged
+    if grid_kind == "every":
+        assert kept == [False, True, True, True, False, True, False, False, True], kept
+    else:
+        assert not any(kept), kept
 
 
 def test_a_new_grid_writes_its_records_over_the_last_ones():
