@@ -363,8 +363,20 @@ class Scheduler(SceneAPI):
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
                                frames.plane_p)
+        # With the cameras as they were, only the objects that changed are tested again;
+        # the box of the visible objects then takes in theirs without letting go of the
+        # old one (it only sets a grid's extent, which may be larger than needed).
+        objects_moved = (c is not None and same_cams and orows is not None and 0 < orows.size
+                         and np.array_equal(origin, c.origin))
         if objects_kept:
             vis_o, box = c.vis_o, c.box
+        elif objects_moved:
+            vis_moved, box_moved = objects_visible(objs.bounds_min[orows], objs.bounds_max[orows],
+                                                   frames.plane_n, frames.plane_p)
+            vis_o = c.vis_o.copy()
+            vis_o[orows] = vis_moved
+            box = np.concatenate([np.minimum(c.box[:3], box_moved[:3]),
+                                  np.maximum(c.box[3:], box_moved[3:])])
         else:
             vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
                                          frames.plane_p)
@@ -520,17 +532,22 @@ class Scheduler(SceneAPI):
         t = _lap(seconds, "shadows", t)
 
         recompute = np.ones(shadow_rows.size, np.bool_)
-        if c is not None and lrows is not None and same_cams and orows.size == 0 \
-                and orows_cast.size == 0:
+        patch = None
+        if c is not None and lrows is not None and same_cams:
             # Casters depend on the light, the cameras and every object: a light none of
-            # them changed for keeps its list.
+            # them changed for keeps its list; when only objects changed, a directional
+            # light's list changes only at those objects' rows.
             changed_l = np.zeros(n_l, np.bool_)
             changed_l[lrows] = True
-            recompute = np.array([changed_l[r] or int(r) not in c.casters
-                                  for r in shadow_rows.tolist()], np.bool_)
+            again = np.array([changed_l[r] or int(r) not in c.casters
+                              for r in shadow_rows.tolist()], np.bool_)
+            if orows.size == 0 and orows_cast.size == 0:
+                recompute = again
+            else:
+                patch = (np.union1d(orows, orows_cast), again)
         casters, kept_casters, plan["casters"] = self._casters(
             frames, splits, shadow_rows, packed, grid, rec_frame, vis_o, recompute,
-            None if c is None else c.casters)
+            None if c is None else c.casters, patch)
         t = _lap(seconds, "casters", t)
 
         # The pair cache: built from this frame's pairs, or the changed lists rewritten.
@@ -624,7 +641,9 @@ class Scheduler(SceneAPI):
                 why.append("a cut")
             plan["frame"] = "incremental: " + ", ".join(why)
         plan["visibility"] = f"frustum planes, {len(frames)} camera(s)" + (
-            "; the objects' kept (they and the cameras did not change)" if objects_kept else "")
+            "; the objects' kept (they and the cameras did not change)" if objects_kept else
+            f"; the {orows.size} changed objects' only (the cameras did not change)"
+            if objects_moved else "")
         plan["priority"] = cfg.model + (
             " (fast: float32 object records relative to the first camera's position, re-anchored "
             f"beyond {REANCHOR:g} m; float64 arithmetic)"
@@ -970,14 +989,18 @@ class Scheduler(SceneAPI):
     def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                  lights_packed: tuple[np.ndarray, np.ndarray], grid: _Grid,
                  frame: tuple[np.ndarray, bool], vis_o: np.ndarray, recompute: np.ndarray,
-                 cached: dict[int, tuple[np.ndarray, np.ndarray]] | None
+                 cached: dict[int, tuple[np.ndarray, np.ndarray]] | None,
+                 patch: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> tuple[tuple[np.ndarray, ...], dict[int, tuple[np.ndarray, np.ndarray]], str]:
         """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
         per-light lists to keep, and the plan: directional lights scan every object against
         their cascade sweeps; point and spot lights walk the light pass's grid, and when it
         holds the visible objects only, a grid of the same kind over the invisible casting
         objects that meet their spheres' bounding box (objects need not be visible to
-        cast). Lights with ``recompute`` False take their lists from ``cached``."""
+        cast). Lights with ``recompute`` False take their lists from ``cached``. ``patch``
+        = (the object rows that changed, per shadow light whether it or the cameras did):
+        a directional light that did not keeps its cached list but at those rows, which
+        alone it sweeps (the sun's sweep of 100k objects took ~0.6 ms)."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
         if n_s == 0:
@@ -1001,6 +1024,8 @@ class Scheduler(SceneAPI):
             lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
             is_dir = (lights.type[rows_t] == DIRECTIONAL).tolist()
             sun = [i for i, d in enumerate(is_dir) if d]
+            patched = [] if patch is None else [i for i in sun if not patch[1][todo[i]]]
+            sun = [i for i in sun if i not in patched]
             if sun:
                 bits = sweep_casters(lo, hi, casts, objs.mask,
                                      lights.mask[rows_t[sun]].astype(np.int64),
@@ -1010,6 +1035,24 @@ class Scheduler(SceneAPI):
                     found[todo[t]] = (rows, bits[i][rows])
                 plan.append(f"{len(sun)} directional: every object against "
                             f"{vm.shape[1]} cascade sweeps")
+            if patched:
+                assert patch is not None and cached is not None
+                rows_p = patch[0]
+                bits = sweep_casters(lo[rows_p], hi[rows_p], casts[rows_p], objs.mask[rows_p],
+                                     lights.mask[rows_t[patched]].astype(np.int64),
+                                     (vn[patched], vq[patched], vm[patched], shared[patched]))
+                changed = np.zeros(len(objs), np.bool_)
+                changed[rows_p] = True
+                for i, t in enumerate(patched):
+                    rows_c, masks_c = cached[int(rows_t[t])]
+                    keep = ~changed[rows_c]
+                    hit = np.flatnonzero(bits[i])
+                    # Both ascending: the new rows go in at their places.
+                    at = np.searchsorted(rows_c[keep], rows_p[hit])
+                    found[todo[t]] = (np.insert(rows_c[keep], at, rows_p[hit]),
+                                      np.insert(masks_c[keep], at, bits[i][hit]))
+                plan.append(f"{len(patched)} directional: the {rows_p.size} changed objects "
+                            f"against {vm.shape[1]} cascade sweeps, the others' kept")
             local = [i for i, d in enumerate(is_dir) if not d]
             if local:
                 rows_l = rows_t[local].astype(np.int64)

@@ -491,9 +491,11 @@ def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, p
     """Objects that move a little keep their place in a grid of every object, their records
     rewritten (pairs.move_records), while each box stays inside its cell's slab widened by
     the grid's largest half-extent; a box that leaves it, or one moved past the grid's
-    edge, makes the grid again. Every frame equals a full frame's, and in exact precision
-    the oracle's (test_fast_precision holds "fast" to its error bound)."""
-    scene = city(3_000, 300, seed=6, shadow_fraction=0.1)
+    edge, makes the grid again. With the cameras still, only the moved objects are tested
+    for visibility and against the sun's cascade sweeps. Every frame equals a full frame's,
+    and in exact precision the oracle's (test_fast_precision holds "fast" to its error
+    bound)."""
+    scene = city(3_000, 300, seed=6, shadow_fraction=0.1, sun_shadows=True)
     cfg = ls.Config(max_lights=4, shadow_budget=8, precision=precision)
     t, p = Twin(cfg), _Pair(cfg)
     objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
@@ -520,6 +522,10 @@ def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, p
             ff, _ = t.frame(cams, dt=1 / 60)
             frames_identical(fa, ff, f"frame {i} ({step})")
         kept.append("records rewritten in place" in fa.stats["plan"]["pairs"])
+        if step and i:
+            plan = fa.stats["plan"]
+            assert f"the {rows.size} changed objects' only" in plan["visibility"], plan
+            assert f"1 directional: the {rows.size} changed objects against" in plan["casters"]
     assert not t.diverged
     if grid_kind == "every":
         assert kept == [False, True, True, True, False, True, False, False, True], kept
