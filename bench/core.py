@@ -22,7 +22,7 @@ before ``s.frame(...)`` and not timed, only ``s.frame(...)`` is:
 - ``camera``: only the camera moves, 0.5 m per frame on a horizontal orbit round the city
   centre, looking at it;
 - ``objects1``: a fixed seeded 1% of the objects move (``update_objects`` with those rows
-  only), each round a horizontal 2 m circle at 3 m/s.
+  only), each round a horizontal 2 m circle at 3 m/s; ``objects10`` the same with 10%.
 
 Per size, the scenarios run interleaved run by run (a new Scheduler per run and scenario),
 so their ratios come from the same minutes. A run steps warm-up frames first (not timed; they
@@ -91,12 +91,14 @@ SCENARIOS = {
     "lights1": "1% of the point/spot lights move",
     "camera": "only the camera moves (0.5 m per frame)",
     "objects1": "1% of the objects move",
+    "objects10": "10% of the objects move",
 }
 DEFAULT_SCENARIOS = ",".join(SCENARIOS)
 DEFAULT_SIZES = "10k:1k,100k:10k,1M:100k"
 QUICK_SIZES, QUICK_SCENARIOS = "10k:1k,100k:10k", "full,static,lights10"
 INCREMENTAL_WARMUP = 20  # > fade_in / fade_out (0.25 s = 15 frames at 60 fps)
-LIGHT_FRACTIONS, OBJECT_FRACTION = {"lights10": 0.10, "lights1": 0.01}, 0.01
+LIGHT_FRACTIONS = {"lights10": 0.10, "lights1": 0.01}
+OBJECT_FRACTIONS = {"objects1": 0.01, "objects10": 0.10}
 CAMERA_STEP = 0.5  # metres per frame along the orbit
 OBJECT_CIRCLE, OBJECT_SPEED = 2.0, 3.0  # metres, metres per second
 
@@ -161,10 +163,10 @@ class Motion:
             k = min(movable.size, max(1, round(LIGHT_FRACTIONS[name] * movable.size)))
             rows = np.sort(rng.choice(movable, size=k, replace=False))
             self.sub = {key: np.asarray(v)[rows] for key, v in lights.items()}
-        elif name == "objects1":
+        elif name in OBJECT_FRACTIONS:
             rng = np.random.default_rng([seed, 601])
             n = int(np.asarray(objects["id"]).size)
-            rows = np.sort(rng.choice(n, size=min(n, max(1, round(OBJECT_FRACTION * n))),
+            rows = np.sort(rng.choice(n, size=min(n, max(1, round(OBJECT_FRACTIONS[name] * n))),
                                       replace=False))
             self.oid = np.asarray(objects["id"])[rows]
             self.lo = np.asarray(objects["bounds_min"], dtype=np.float64)[rows]
@@ -192,7 +194,7 @@ class Motion:
         elif self.name in LIGHT_FRACTIONS:
             s.update_lights(id=self.sub["id"], position=move_lights(self.sub, i))
             self.changed = int(self.sub["id"].size)
-        elif self.name == "objects1":
+        elif self.name in OBJECT_FRACTIONS:
             angle = self.phase + (OBJECT_SPEED / OBJECT_CIRCLE) * i * DT
             d = np.zeros((self.oid.size, 3))
             d[:, 0] = OBJECT_CIRCLE * (np.cos(angle) - np.cos(self.phase))
@@ -464,7 +466,8 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
            "only), `lights1` 1% of them; `camera` only the camera moves, 0.5 m per frame "
            "on an orbit round the city centre, looking at it; `objects1` a fixed seeded 1% "
            "of the objects move on "
-           f"2 m circles (`update_objects` with those rows only). Scenarios other than `full` and `all` "
+           f"2 m circles (`update_objects` with those rows only), `objects10` 10% of them. "
+           "Scenarios other than `full` and `all` "
            f"run at N <= {upto} only. Targets are issue 6's (2-core machine); \"plan\" is the "
            "last frame's `stats[\"plan\"]` values.", "",
            "| scenario | N | L | median ms | run medians ms | p10..p90 ms | target ms | status "
@@ -554,7 +557,8 @@ def incremental_answer(results: list[dict[str, Any]]) -> str:
     n, l = (100_000, 10_000) if (100_000, 10_000) in sizes else max(sizes)
     words = {"static": "nothing moved", "lights10": "10% of the lights moved",
              "lights1": "1% of the lights moved",
-             "camera": "only the camera moved", "objects1": "1% of the objects moved"}
+             "camera": "only the camera moved", "objects1": "1% of the objects moved",
+             "objects10": "10% of the objects moved"}
     parts = []
     for r in inc:
         if (r["n"], r["l"]) != (n, l):

@@ -544,7 +544,14 @@ class Scheduler(SceneAPI):
             if orows.size == 0 and orows_cast.size == 0:
                 recompute = again
             else:
-                patch = (np.union1d(orows, orows_cast), again)
+                # (np.union1d took 1.8 ms for 10k rows.)
+                rows_p = orows
+                if orows_cast.size:
+                    mark = np.zeros(n, np.bool_)
+                    mark[orows] = True
+                    mark[orows_cast] = True
+                    rows_p = np.flatnonzero(mark)
+                patch = (rows_p, again)
         casters, kept_casters, plan["casters"] = self._casters(
             frames, splits, shadow_rows, packed, grid, rec_frame, vis_o, recompute,
             None if c is None else c.casters, patch)
