@@ -242,6 +242,9 @@ class Scheduler(SceneAPI):
         # The per-object output arrays of the frame before the last, and the rows by which
         # they lag the last frame's (None: all); _outputs takes them back when free.
         self._spare: tuple[dict[str, np.ndarray], np.ndarray | None] | None = None
+        # The pair heap the last frame replaced, which nothing reads any more; _new_heap
+        # takes it back.
+        self._spare_heap: tuple[np.ndarray, np.ndarray] | None = None
         # (visibility, grid position of each row, and the grid positions and masks of the
         # objects out of view) for the walks of the candidate lists.
         self._hidden: tuple[np.ndarray, ...] | None = None
@@ -254,6 +257,19 @@ class Scheduler(SceneAPI):
             buf = aligned_empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
             self._buffers[name] = buf
         return buf
+
+    def _new_heap(self, room: int) -> tuple[np.ndarray, np.ndarray]:
+        """A pair heap (P float64, light row int32) of at least ``room`` records for a frame
+        that makes every list anew: the one the last frame replaced when it is large enough
+        and not over twice that, else new arrays with an eighth more room, so that a scene a
+        little larger next frame takes this one back. At (1M, 100k) the P array (~36 MB) is
+        over glibc's mmap threshold: a new one each frame was mapped and faulted in again
+        (bench/frames.py: 18 huge and ~350 small page faults a frame)."""
+        spare, self._spare_heap = self._spare_heap, None
+        if spare is not None and room <= spare[0].size <= 2 * room + 4096:
+            return spare
+        room += room // 8
+        return (np.empty(room), np.empty(room, np.int32))
 
     # ------------------------------------------------------------------ the frame
 
@@ -564,17 +580,17 @@ class Scheduler(SceneAPI):
             c_seg, _, c_j, _ = cands.lists
             room = int(c_seg[:, 1].sum()) + n * dir_rows.size
             seg = np.empty((n, 2), np.int64)
-            heap = (np.empty(room), np.empty(room, np.int32))
+            heap = self._new_heap(room)
             used = int(candidate_pairs((c_seg, c_j), cands.recs, packed, compete, dir_rows,
                                        p_params, (seg, *heap)))
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "every pair from the objects' candidate lists, by object row"
         elif full:
-            start, heap = self._group(fresh, n)
+            start, heap = self._group(fresh, n, cached=True)
             seg = np.empty((n, 2), np.int64)
             seg[:, 0] = start[:-1]
             np.subtract(start[1:], start[:-1], out=seg[:, 1])
-            used = heap[0].size
+            used = int(start[-1])
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "grouped by object (every pair new)"
         else:
@@ -625,6 +641,8 @@ class Scheduler(SceneAPI):
             shadow_lights=lights.id[shadow_rows], shadow_tier=shadow_tier,
             caster_offsets=casters[0], caster_ids=casters[1], caster_masks=casters[2])
         freeze(frame)
+        if c is not None and c.heap[0] is not heap[0]:
+            self._spare_heap = c.heap
         prev_ids, shadow_ids = self._shadow_prev[0], lights.id[shadow_rows]
         settled = prev_ids.size == shadow_ids.size and (
             shadow_ids.size == 0 or np.array_equal(np.sort(prev_ids), np.sort(shadow_ids)))
@@ -818,14 +836,16 @@ class Scheduler(SceneAPI):
                            p_params)
         return rows, offsets, count, pair_obj, pair_p
 
-    def _group(self, walked: tuple[np.ndarray, ...], n: int
+    def _group(self, walked: tuple[np.ndarray, ...], n: int, cached: bool = False
                ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """Light-major pairs grouped by object row: (start [N+1], (P float64 [H], light row
-        int32 [H])), object o's pairs at start[o]..start[o+1]-1."""
+        int32 [H])), object o's pairs at start[o]..start[o+1]-1. ``cached``: the pairs are
+        the new pair cache, in a heap from _new_heap (H may be larger than the pairs)."""
         rows, offsets, count, pair_obj, pair_p = walked
         n_pairs = int(count.sum())
         start = np.empty(n + 1, np.int64)
-        heap = (np.empty(n_pairs), np.empty(n_pairs, np.int32))
+        heap = (self._new_heap(n_pairs) if cached
+                else (np.empty(n_pairs), np.empty(n_pairs, np.int32)))
         # Positions fit int32 below 2^31 pairs: half the bytes keeps each thread's histogram
         # in its core's L2 at 100k objects (the grouping 3.5 -> 3.2 ms in a full frame).
         wide = n_pairs >= 2**31

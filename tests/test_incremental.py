@@ -557,6 +557,36 @@ def test_a_new_grid_writes_its_records_over_the_last_ones():
     assert len(set(addresses)) <= 2, addresses
 
 
+def test_frames_that_make_every_list_take_turns_with_two_pair_heaps():
+    """A frame that makes every pair list anew (every light moving: from the candidate
+    lists, or grouped from the grid's walk) writes them into the heap the last such frame
+    replaced (a fresh one per frame was mapped and faulted in again at 1M objects); frames
+    between them (a tenth of the lights moving, a cut) change theirs; and every frame stays
+    that of a scheduler that builds everything anew."""
+    p = _Pair(ls.Config(max_lights=4, fade_in=0.05, fade_out=0.05))
+    scene = city(3_000, 300, seed=8, shadow_fraction=0.05)
+    p.set_lights(**scene.lights)
+    p.set_objects(**scene.objects)
+    few = slice(None, None, 10)
+    addresses, plans = [], set()
+    for i in range(12):
+        sub = {k: v[few] for k, v in scene.lights.items()} if i % 4 == 3 else scene.lights
+        p.update_lights(id=sub["id"], position=move_lights(sub, i))
+        cut = i == 6
+        fa = p.a.frame(scene.cameras, dt=1 / 60, cut=cut)
+        fb = p.b.frame(scene.cameras, dt=1 / 60, cut=cut)
+        frames_identical(fa, fb, f"frame {i}")
+        plans.add(fa.stats["plan"]["lists"].split(";")[0])
+        if i % 4 != 3:
+            addresses.append(p.a._cache.heap[0].__array_interface__["data"][0])
+    # (With a grid of the visible objects only, every light moving is a full frame.)
+    assert "cache kept" in plans and plans - {"cache kept"} <= {
+        "every pair from the objects' candidate lists, by object row",
+        "grouped by object (every pair new)"}, plans
+    # Two heaps take turns once the first frames have made them.
+    assert len(set(addresses[2:])) == 2, addresses
+
+
 def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
     """Output arrays of the frame before the last are written again only when nothing
     outside the scheduler holds them: frames a caller keeps stay as returned; frames it
