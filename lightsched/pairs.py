@@ -1558,18 +1558,17 @@ def scan_pairs(seg, heap_j, light_flag, drop):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def compact_heap(seg, heap, spare):
-    """The live segments of the heap (P, light row) packed into a new heap with ``spare``
-    free records after them; returns (new seg, new heap, records used). Segment order is
-    row order."""
+def compact_heap(seg, heap, out):
+    """The live segments of the heap (P, light row) packed from the start of ``out`` (P,
+    light row), another heap with room for them (the records after them are free); returns
+    (new seg, out, records used). Segment order is row order."""
     n = seg.shape[0]
     start = np.zeros(n + 1, np.int64)
     for o in range(n):
         start[o + 1] = start[o] + seg[o, 1]
     used = start[n]
     heap_p, heap_j = heap
-    new_p = np.empty(used + spare)
-    new_j = np.empty(used + spare, np.int32)
+    new_p, new_j = out
     new_seg = np.empty_like(seg)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
@@ -1581,7 +1580,7 @@ def compact_heap(seg, heap, spare):
                 new_j[d + t] = heap_j[a + t]
             new_seg[o, 0] = d
             new_seg[o, 1] = seg[o, 1]
-    return new_seg, (new_p, new_j), used
+    return new_seg, out, used
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")

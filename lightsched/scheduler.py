@@ -34,6 +34,7 @@ last (read-only) frame's light_ids and fade_state.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -259,12 +260,15 @@ class Scheduler(SceneAPI):
         return buf
 
     def _new_heap(self, room: int) -> tuple[np.ndarray, np.ndarray]:
-        """A pair heap (P float64, light row int32) of at least ``room`` records for a frame
-        that makes every list anew: the one the last frame replaced when it is large enough
-        and not over twice that, else new arrays with an eighth more room, so that a scene a
-        little larger next frame takes this one back. At (1M, 100k) the P array (~36 MB) is
-        over glibc's mmap threshold: a new one each frame was mapped and faulted in again
-        (bench/frames.py: 18 huge and ~350 small page faults a frame)."""
+        """A pair heap (P float64, light row int32) of at least ``room`` records, for a frame
+        that makes every list anew or packs the cache: the one the last frame replaced when
+        it is large enough and not over twice that, else new arrays with an eighth more
+        room, so that a scene a little larger next frame takes this one back. At (1M, 100k)
+        the P array (~36 MB) is over glibc's mmap threshold: a new one each full frame was
+        mapped and faulted in again (bench/frames.py: 18 huge and ~350 small page faults a
+        frame), and a new packed heap every few frames of 10% of the lights moving was
+        faulted in page by page as the lists were appended to it (~4700 faults a frame).
+        """
         spare, self._spare_heap = self._spare_heap, None
         if spare is not None and room <= spare[0].size <= 2 * room + 4096:
             return spare
@@ -1000,7 +1004,7 @@ class Scheduler(SceneAPI):
             w_start = start_at(rows2, w_obj, n)
         o_start, o_pairs = fresh_obj
         # The cache is this frame's to change.
-        seg, heap, used = _room(c.seg, c.heap, c.used, w_pairs[0].size
+        seg, heap, used = _room(self._new_heap, c.seg, c.heap, c.used, w_pairs[0].size
                                 + int(c.seg[rows2, 1].sum()) + o_pairs[0].size)
         walked_flag = (flag & WALKED) != 0
         used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,
@@ -1199,16 +1203,18 @@ def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.nd
     return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows), pos_of
 
 
-def _room(seg: np.ndarray, heap: tuple[np.ndarray, np.ndarray], used: int, need: int
+def _room(new_heap: Callable[[int], tuple[np.ndarray, np.ndarray]], seg: np.ndarray,
+          heap: tuple[np.ndarray, np.ndarray], used: int, need: int
           ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int]:
     """A pair cache (seg, heap, records used) with room for ``need`` more records. New lists
     go after the records in use (those are not written), the heap packed first when short
-    of room or mostly garbage. The room left after packing holds ~4 more frames like this
-    one: with room for one, a scene moving 10% of its lights packed every other frame (~1
-    ms at 100k objects each time)."""
+    of room or mostly garbage, into ``new_heap(records)`` (Scheduler._new_heap). The room
+    left after packing holds ~4 more frames like this one: with room for one, a scene
+    moving 10% of its lights packed every other frame (~1 ms at 100k objects each time)."""
     n_live = int(seg[:, 1].sum())
     if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
-        seg, heap, used = compact_heap(seg, heap, 4 * need + n_live // 2 + 1024)
+        seg, heap, used = compact_heap(seg, heap,
+                                       new_heap(n_live + 4 * need + n_live // 2 + 1024))
     return seg, heap, used
 
 
