@@ -888,7 +888,8 @@ class Scheduler(SceneAPI):
         point or spot light keeps its candidates while its sphere lies inside the one they
         were found with (pairs.left_spheres); the others walk the grid again with
         their sphere widened by SKIN, range test only (every light mask bit: the lists must
-        not depend on the lights' masks, which may change while they are kept), and the
+        not depend on the lights' masks, which may change while they are kept), a light
+        that turned directional is dropped from them, and the
         lists of the objects they leave or enter are edited in place (pairs.edit_candidates;
         a list that outgrows its room moves to the spare room). All are made again when
         there are none, most lights left theirs, or the spare room ran out; made with
@@ -901,10 +902,17 @@ class Scheduler(SceneAPI):
         own = compete & ~is_dir
         walk_mask = own
         hold = hidden if old is None else old.hidden
+        gone = np.zeros(0, np.int64)
         if old is not None:
             walk_mask = left_spheres(hot, old.anchor, own)
             if np.count_nonzero(walk_mask) > REBUILD_SHARE * np.count_nonzero(own):
                 old, walk_mask, hold = None, own, hidden
+            else:
+                # A point or spot light that turned directional still has its objects in
+                # the lists (it has an anchor), where candidate_pairs would pair it again
+                # beside its directional pair: it is dropped from them, as a walk that
+                # found nothing.
+                gone = np.flatnonzero(is_dir & (old.anchor[:, 3] > 0))
         # The walk as the light pass's with every light a point light of the widened radius
         # and every mask bit (its P are not used).
         wide = hot.copy()
@@ -934,6 +942,11 @@ class Scheduler(SceneAPI):
                 grid.vis[1][pos, 6] = 0
 
         walked = walk_of(walk_mask)
+        if gone.size:
+            rows, offsets, count = walked[:3]
+            walked = (np.concatenate([rows, gone.astype(rows.dtype)]),
+                      np.concatenate([offsets, np.full(gone.size, offsets[-1])]),
+                      np.concatenate([count, np.zeros(gone.size, count.dtype)]), *walked[3:])
         if old is not None:
             if edit_candidates(walked[:4], old.lists, old.by_light):
                 by_light, used = old.by_light, old.used
@@ -946,7 +959,7 @@ class Scheduler(SceneAPI):
                 used = light_lists(walked[:4], by_light, used)
                 out = _Candidates(old.anchor, old.lists, by_light, used, old.recs, hold)
             else:
-                old, walk_mask, hold = None, own, hidden
+                old, walk_mask, hold, gone = None, own, hidden, gone[:0]
                 walked = walk_of(own)
         if old is None:
             n = grid.pos_of.size
@@ -966,7 +979,8 @@ class Scheduler(SceneAPI):
         walk = walked[0]
         out.anchor[walk, :3] = hot[walk, :3]
         out.anchor[walk, 3] = wide[walk, 3]
-        return out, walk.size, old is None
+        out.anchor[gone, 3] = 0.0
+        return out, walk.size - gone.size, old is None
 
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...],

@@ -415,6 +415,43 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
         assert set(plans) == {""}, plans
 
 
+@pytest.mark.parametrize("in_slots", [True, False])
+def test_a_light_that_turns_directional_leaves_the_candidate_lists(grid_kind, in_slots):
+    """A point light that turns directional is dropped from the objects' candidate lists
+    it was in, and a directional light that turns point joins them. The thesis model makes
+    each camera move a full frame, which takes its pairs from the kept lists. (Found by
+    test_sequence_matches_oracle: the directional light stayed in the lists, and
+    candidate_pairs paired it twice with each object, once from its list and once as a
+    directional light: a repeated light in a row and garbage fade states.)"""
+    t = Twin(ls.Config(max_lights=3, model="thesis", fade_in=0.0, fade_out=0.0,
+                       directional_in_slots=in_slots))
+    n_l = 6
+    t.set_lights(id=np.arange(n_l), type=np.zeros(n_l, np.int64),
+                 position=np.array([[1.0, 0.0, 15.0]] + [[0.0, 0.0, 15.0]] * (n_l - 1)),
+                 radius=np.array([8.0, 0.5, 20.0, 0.5, 0.5, 0.5]),
+                 direction=np.tile([0.0, 0.0, 1.0], (n_l, 1)), intensity=np.full(n_l, 1.0))
+    t.set_objects(id=np.arange(4), bounds_min=np.tile([1.0, 0.0, 15.0], (4, 1)),
+                  bounds_max=np.tile([1.5, 0.5, 15.5], (4, 1)))
+    near = ls.Camera(position=np.array([0.0, 0.0, -15.0]), forward=np.array([0.0, 0.0, 1.0]),
+                     up=np.array([0.0, 1.0, 0.0]), fov_y=1.2, aspect=1.3, near=0.1, far=100.0)
+    far = _moved_camera(near, -2.0)
+    plans = []
+    light_type = 0
+    for cams, turn in [(near, None), (far, None), (far, 2), (near, None), (far, 0),
+                       (near, None)]:
+        if turn is not None:
+            light_type = turn
+            t.update_lights(id=np.array([0]), type=np.array([turn]))
+        ff, _ = t.frame([cams], dt=1 / 60)
+        plans.append(_cand_plan(ff))
+        # Light 0 reaches every object: it holds a slot of each unless it is a directional
+        # light kept out of the slots.
+        held = (ff.light_ids == 0).sum(axis=1)
+        assert np.array_equal(held, np.full(4, int(light_type == 0 or in_slots))), held
+    assert plans == (["", "made", "", "kept", "kept", "kept"] if grid_kind == "every"
+                     else [""] * 6), plans
+
+
 def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
     """Every light moving makes a full frame; with the objects and cameras as they were,
     it keeps their visibility and grid (same bits as a frame that builds them) until the
