@@ -83,6 +83,7 @@ from .simd import (
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
 GROUP_PARTS = 2              # independent histograms when grouping pairs by object
+SERIAL_PAIRS = 1 << 15       # fewer pairs are grouped on one thread (group_parts)
 OBJECT_CHUNK = 256           # objects per parallel work item of the object pass
 LIGHT_CHUNK = 64             # lights per parallel work item of the light pass
 SCAN_LANES = 8               # pairs scan_pairs reads per object in a loop of fixed length
@@ -784,37 +785,77 @@ def _light_casters(t, lights, rows, grid, walk, casts, vols, offsets, out_rows, 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
-    the order it writes its outputs. The lights are split into GROUP_PARTS runs, each with
-    its own histogram (parallel); within an object the runs follow each other, so the
-    order of its lights is the order of ``rows`` whatever the thread count. out = (hist
-    [GROUP_PARTS, N+1] int32 (int64 from 2^31 pairs) scratch, start [N+1], (P float64 [H],
-    light row int32 [H])), reused buffers; fills start and the pairs (P, light row): one
-    position, two stores per scattered pair."""
+    the order it writes its outputs. The lights are split into one run per row of the
+    histogram, each counted and placed with its own row (in parallel when there are
+    several); within an object the runs follow each other, so the order of its lights is
+    the order of ``rows`` whatever the runs and threads. out = (hist [Q, N+1] int32 (int64
+    from 2^31 pairs) scratch, start [N+1], (P float64 [H], light row int32 [H])), reused
+    buffers; fills start and the pairs (P, light row): one position, two stores per
+    scattered pair.
+
+    Q = 1 runs on the calling thread: with two runs both threads store into every
+    object's segment, the lines of the small segments go back and forth between the
+    cores, and below ~2^15 pairs one thread is faster (``group_parts``)."""
     hist, start, (pair_p_out, pair_j_out) = out
-    n_l = rows.shape[0]
     n_obj = start.shape[0] - 1
-    for q in nb.prange(GROUP_PARTS):
-        hist[q, :] = 0
-        for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
-            for e in range(offsets[t], offsets[t] + count[t]):
-                hist[q, pair_obj[e]] += 1
+    parts = hist.shape[0]
+    if parts == 1:
+        # A loop: hist[0, :] = 0 would be a parallel region of its own in this kernel.
+        for o in range(n_obj + 1):
+            hist[0, o] = 0
+        _count_run(0, 1, rows, offsets, count, pair_obj, hist)
+    else:
+        for q in nb.prange(parts):
+            hist[q, :] = 0
+            _count_run(q, parts, rows, offsets, count, pair_obj, hist)
     run = 0
     for o in range(n_obj):
         start[o] = run
-        for q in range(GROUP_PARTS):
+        for q in range(parts):
             c = hist[q, o]
             hist[q, o] = run
             run += c
     start[n_obj] = run
-    for q in nb.prange(GROUP_PARTS):
-        for t in range(n_l * q // GROUP_PARTS, n_l * (q + 1) // GROUP_PARTS):
-            j = rows[t]
-            for e in range(offsets[t], offsets[t] + count[t]):
-                o = pair_obj[e]
-                d = hist[q, o]
-                pair_p_out[d] = pair_p[e]
-                pair_j_out[d] = j
-                hist[q, o] = d + 1
+    if parts == 1:
+        _place_run(0, 1, rows, offsets, count, pair_obj, pair_p, hist, pair_p_out, pair_j_out)
+    else:
+        for q in nb.prange(parts):
+            _place_run(q, parts, rows, offsets, count, pair_obj, pair_p, hist, pair_p_out,
+                       pair_j_out)
+
+
+def group_parts(n_pairs: int) -> int:
+    """The histogram rows (runs) group_pairs takes for n_pairs pairs: one below
+    SERIAL_PAIRS, else GROUP_PARTS. On a frame's captured inputs (caches flushed, paired
+    medians), one run against two: (1k, 100) full, 3.7k pairs, -25 us of ~77; (10k, 1k)
+    lights10, 3.7k pairs, -29 of ~125; (100k, 10k) lights10, 44k pairs, 841 against 791
+    us; (1M, 100k) lights10, 360k pairs, 7.55 against 6.58 ms (bench/RESULTS.md)."""
+    return 1 if n_pairs < SERIAL_PAIRS else GROUP_PARTS
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _count_run(q, parts, rows, offsets, count, pair_obj, hist):
+    """group_pairs' count of run q of ``parts`` (of the lights ``rows``): its lights' pairs
+    per object row, added to hist[q] (zeros)."""
+    n_l = rows.shape[0]
+    for t in range(n_l * q // parts, n_l * (q + 1) // parts):
+        for e in range(offsets[t], offsets[t] + count[t]):
+            hist[q, pair_obj[e]] += 1
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _place_run(q, parts, rows, offsets, count, pair_obj, pair_p, hist, pair_p_out,
+               pair_j_out):
+    """group_pairs' scatter of run q of ``parts`` from its positions in hist[q]."""
+    n_l = rows.shape[0]
+    for t in range(n_l * q // parts, n_l * (q + 1) // parts):
+        j = rows[t]
+        for e in range(offsets[t], offsets[t] + count[t]):
+            o = pair_obj[e]
+            d = hist[q, o]
+            pair_p_out[d] = pair_p[e]
+            pair_j_out[d] = j
+            hist[q, o] = d + 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

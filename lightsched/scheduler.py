@@ -59,6 +59,7 @@ from .pairs import (
     grid_shape,
     group_few,
     group_pairs,
+    group_parts,
     left_spheres,
     light_bounds,
     light_grid,
@@ -855,8 +856,9 @@ class Scheduler(SceneAPI):
         wide = n_pairs >= 2**31
         hist = self._scratch("hist64" if wide else "hist", GROUP_PARTS * (n + 1),
                              np.int64 if wide else np.int32)
+        parts = group_parts(n_pairs)
         group_pairs(rows, offsets, count, pair_obj, pair_p,
-                    (hist[:GROUP_PARTS * (n + 1)].reshape(GROUP_PARTS, n + 1), start, heap))
+                    (hist[:parts * (n + 1)].reshape(parts, n + 1), start, heap))
         return start, heap
 
     def _fresh_pairs(self, rows: np.ndarray, packed: tuple[np.ndarray, np.ndarray],

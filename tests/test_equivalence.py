@@ -385,10 +385,14 @@ def test_both_pair_paths_are_exercised():
 
 
 @pytest.mark.parametrize("hist_dtype", [np.int32, np.int64])
-def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
+@pytest.mark.parametrize("parts", [1, 2, 3])
+def test_group_pairs_is_a_stable_sort_by_object(hist_dtype, parts):
     """The pair cache is the light-major pairs sorted by object row, each object's lights in
-    the walk's order, with either histogram width (int64 serves from 2^31 pairs)."""
-    from lightsched.pairs import GROUP_PARTS, group_pairs
+    the walk's order, with either histogram width (int64 serves from 2^31 pairs) and on
+    one thread (one run of lights) or in parallel runs."""
+    from lightsched.pairs import GROUP_PARTS, SERIAL_PAIRS, group_pairs, group_parts
+
+    assert group_parts(SERIAL_PAIRS - 1) == 1 and group_parts(SERIAL_PAIRS) == GROUP_PARTS
 
     rng = np.random.default_rng(3)
     n_obj, n_l = 500, 37
@@ -400,7 +404,7 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype):
     start = np.empty(n_obj + 1, np.int64)
     heap = (np.empty(count.sum()), np.empty(count.sum(), np.int32))
     group_pairs(rows, offsets, count, pair_obj, pair_p,
-                (np.full((GROUP_PARTS, n_obj + 1), 7, hist_dtype), start, heap))
+                (np.full((parts, n_obj + 1), 7, hist_dtype), start, heap))
     seg = [np.arange(offsets[t], offsets[t] + count[t]) for t in range(n_l)]
     e = np.concatenate(seg)
     light = np.repeat(rows, count)
