@@ -978,11 +978,11 @@ class Scheduler(SceneAPI):
                           out=aligned_empty((n, 8), grid.vis[0].dtype))
             out = _Candidates(np.zeros((n_l, 4)), lists, by_light, used,
                               (box, box.view(grid.vis[1].dtype)), hold)
-        walk = walked[0]
+        walk = walked[0][:walked[0].size - gone.size]
         out.anchor[walk, :3] = hot[walk, :3]
         out.anchor[walk, 3] = wide[walk, 3]
         out.anchor[gone, 3] = 0.0
-        return out, walk.size - gone.size, old is None
+        return out, walk.size, old is None
 
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...],
