@@ -79,6 +79,10 @@ from .simd import (
     point_run,
     prefetch_row,
     spot_priority,
+    stream_fill,
+    stream_pack,
+    stream_run,
+    stream_spots,
 )
 
 MAX_CELLS = 1 << 21          # bounds grid memory whatever the scene's extent
@@ -908,17 +912,26 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     directional lights ``dir_rows``. So a frame whose lights moved within their skins
     walks no grid and groups nothing, and finds the same pairs (bench/RESULTS.md, Next 10
     and ebb5ec0: the pairs and lists stages of a full (100k, 10k) frame 8.3 -> 6.6 ms,
-    the lists' upkeep included). Under the contribution model with float64 records an
-    object's candidates go eight at a time through simd.candidate_run (the same bits;
-    the lists stage of a full (100k, 10k) frame ~5.1 -> ~3.8 ms); otherwise the scalar
-    loop below. Where the lights' rows do not stay cached, those of the next object's
-    candidates are prefetched while this one's are tested (PREFETCH_OBJECTS).
+    the lists' upkeep included).
+
+    Under the contribution model with float64 records and no directional light in the
+    slots, each chunk of objects runs as a stream (_stream_chunk): its candidates laid end
+    to end and taken eight a step in vector code whatever object each belongs to, the spot
+    lights' cones eight at a time after them, then the pairs packed into the chunk's room.
+    Object by object (candidate_run, eight candidates of one object a step), a step held
+    6.2 candidates on average and a branch on its spots' cones failed unpredictably (40%
+    of the steps hold a spot): on captured inputs of a full (100k, 10k) frame, 2.81 ->
+    2.07 ms (bench/RESULTS.md). Otherwise object by object: candidate_run, or the scalar
+    loop below (other models, "fast" float32 records); where the lights' rows do not stay
+    cached, those of the next object's candidates are prefetched while this one's are
+    tested (PREFETCH_OBJECTS).
 
     cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
     integer view): the grid's records in object row order; lights = (light_hot, light_f);
     params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]) with H
-    at least the candidates plus N * len(dir_rows). Fills out (each object's pairs at the
-    start of its room) and returns the records its rooms take."""
+    at least the candidates plus N * len(dir_rows). Fills out, each object's pairs in
+    candidate order within the room of its chunk of objects (the candidates, plus
+    len(dir_rows) per object), and returns the records those rooms take."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
@@ -926,9 +939,10 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
     model = int(params[0])
     n = c_seg.shape[0]
     n_dir = dir_rows.shape[0]
-    # candidate_run reads whole 8-word rows.
+    # candidate_run and the stream read whole 8-word rows.
     vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
               and lf.shape[1] == 8)
+    stream = vector and n_dir == 0
     far = hot.nbytes > PREFETCH_BYTES
     room = 0
     for o in range(n):
@@ -936,7 +950,11 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
         room += c_seg[o, 1] + n_dir
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
-        for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
+        o0 = ch * OBJECT_CHUNK
+        o1 = min(n, o0 + OBJECT_CHUNK)
+        if stream and _stream_chunk(cands, recs, lights, compete, o0, o1, out):
+            continue
+        for o in range(o0, o1):
             m = o_seg[o, 0]
             ahead = o + PREFETCH_OBJECTS
             if far and ahead < n and bits[ahead, 6] != 0:
@@ -962,6 +980,41 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
                     m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
     return room
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _stream_chunk(cands, recs, lights, compete, o0, o1, out):
+    """candidate_pairs' vector path for the object rows o0..o1-1 (no directional light in
+    the slots): their candidates laid end to end (simd.stream_fill), the exact test and P
+    eight entries a step (stream_run), the spots in range eight a step (stream_spots),
+    the pairs packed from the chunk's room on (stream_pack), each object's segment from
+    the pairs before its first entry. The same pairs, in the same order and bits, as
+    candidate_run object by object. Returns False, having written nothing, for float32
+    records. out as candidate_pairs', whose o_seg[o0, 0] holds the chunk's room."""
+    c_seg, _ = cands
+    box = recs[0]
+    o_seg, o_p, o_j = out
+    base = o_seg[o0, 0]
+    size = o_seg[o1 - 1, 0] + c_seg[o1 - 1, 1] - base
+    # Each step stores eight entries whole: room for one more step.
+    ints = np.empty((3, size + LANES), np.int32)
+    stream = (ints[0], ints[1])
+    spots = ints[2]
+    starts = np.empty(o1 - o0 + 1, np.int64)
+    n_s = stream_fill(cands, recs, o0, o1, stream, starts)
+    if n_s < 0:
+        return False
+    results = (np.empty(n_s + LANES), np.empty(n_s + LANES, np.uint8))
+    n_spots = stream_run(box, lights[0], compete, stream, n_s, results, spots)
+    if n_spots:
+        stream_spots(box, lights, stream, spots, n_spots, results)
+    before = np.empty(n_s + LANES + 1, np.int64)
+    stream_pack(stream, results, n_s, (o_p, o_j), base, before)
+    for o in range(o0, o1):
+        a = before[starts[o - o0]]
+        o_seg[o, 0] = base + a
+        o_seg[o, 1] = before[starts[o - o0 + 1]] - a
+    return True
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

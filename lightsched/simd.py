@@ -226,10 +226,7 @@ class _Run:
 
     def store(self, values: ir.Value, ptr: ir.Value, lanes: ir.Value) -> None:
         """Stores the lanes of ``values`` at ``ptr``."""
-        suffix, size = _element(values.type)
-        fn = _declare(self.b, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
-                      [values.type, ptr.type, _I32, _VB])
-        self.b.call(fn, [values, ptr, ir.Constant(_I32, size), lanes])
+        _masked_store(self.b, values, ptr, lanes)
 
     def hits(self, f: list[ir.Value], lanes: ir.Value) -> tuple[ir.Value, ir.Value]:
         """(hit per lane, d2 per lane) of the light and the records' fields f: box_d2, then
@@ -297,23 +294,36 @@ class _Run:
     def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value) -> None:
         """Stores the lanes of ``values`` that hit, in lane order, from ``out`` on (count
         of them)."""
-        b = self.b
-        vty = values.type
-        suffix, size = _element(vty)
-        ptr = b.bitcast(out, ir.PointerType(vty))
-        align = ir.Constant(_I32, size)
-        if self.in_register:
-            name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
-            packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
-                            [values, ir.Constant(vty, [0] * LANES), hit])
-            first = b.icmp_signed("<", self.iota, _splat(b, count, _VI64))
-            store = _declare(b, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
-                             [vty, ir.PointerType(vty), _I32, _VB])
-            b.call(store, [packed, ptr, align, first])
-        else:
-            store = _declare(b, f"llvm.masked.compressstore.v8{suffix}", ir.VoidType(),
-                             [vty, ir.PointerType(vty.element), _VB])
-            b.call(store, [values, out, hit])
+        _compress_store(self.b, values, hit, out, count, self.in_register)
+
+
+def _masked_store(builder: ir.IRBuilder, values: ir.Value, ptr: ir.Value, lanes: ir.Value
+                  ) -> None:
+    """Stores the lanes of ``values`` at ``ptr`` (a pointer to the vector type)."""
+    suffix, size = _element(values.type)
+    fn = _declare(builder, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
+                  [values.type, ptr.type, _I32, _VB])
+    builder.call(fn, [values, ptr, ir.Constant(_I32, size), lanes])
+
+
+def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Value,
+                    count: ir.Value, in_register: bool) -> None:
+    """Stores the lanes of ``values`` that hit, in lane order, from ``out`` (a pointer to
+    the element) on; ``count`` of them. With AVX-512 packed in a register, then the first
+    ``count`` lanes stored; else the portable compress store."""
+    vty = values.type
+    suffix, size = _element(vty)
+    if in_register:
+        name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
+        packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
+                        [values, ir.Constant(vty, [0] * LANES), hit])
+        first = b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))),
+                              _splat(b, count, _VI64))
+        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), first)
+    else:
+        store = _declare(b, f"llvm.masked.compressstore.v8{suffix}", ir.VoidType(),
+                         [vty, ir.PointerType(vty.element), _VB])
+        b.call(store, [values, out, hit])
 
 
 def _element(vty: ir.VectorType) -> tuple[str, int]:
@@ -529,10 +539,7 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
             live = builder.and_(lanes, builder.icmp_unsigned(
                 "!=", comp, ir.Constant(ir.VectorType(_I8, LANES), [0] * LANES)))
             hit, d2 = run.hits(f, live)
-            typ = builder.and_(builder.ashr(builder.fptosi(light[5], _VI64),
-                                            ir.Constant(_VI64, [3] * LANES)),
-                               ir.Constant(_VI64, [3] * LANES))
-            spot = builder.icmp_signed("==", typ, ir.Constant(_VI64, [SPOT] * LANES))
+            spot = _is_spot(builder, light[5])
             hit_slot = cgutils.alloca_once_value(builder, hit)
             s_slot = cgutils.alloca_once_value(builder, run.one)
             spot_hit = builder.and_(hit, spot)
@@ -551,6 +558,289 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
             run.append(rows32, hit, builder.gep(j_ptr, [m]), count)
             builder.store(builder.add(m, count), m_slot)
         return builder.load(m_slot)
+
+    return sig, codegen
+
+
+def _is_spot(b: ir.IRBuilder, type_field: ir.Value) -> ir.Value:
+    """Per lane, whether light_hot's column 5 (row << 5 | type << 3, priority.pack_lights)
+    says spot."""
+    typ = b.and_(b.ashr(b.fptosi(type_field, _VI64), ir.Constant(_VI64, [3] * LANES)),
+                 ir.Constant(_VI64, [3] * LANES))
+    return b.icmp_signed("==", typ, ir.Constant(_VI64, [SPOT] * LANES))
+
+
+def _data(context, builder: ir.IRBuilder, ty, value: ir.Value, elem: ir.Type) -> ir.Value:
+    """The data pointer of the array ``value`` (numba type ``ty``) as elem*."""
+    return builder.bitcast(context.make_array(ty)(context, builder, value).data,
+                           ir.PointerType(elem))
+
+
+def _tuple_data(context, builder: ir.IRBuilder, ty, value: ir.Value,
+                elems: tuple[ir.Type, ...]) -> list[ir.Value]:
+    """The data pointers of the arrays of the tuple ``value`` (numba type ``ty``)."""
+    return [_data(context, builder, ty[k], builder.extract_value(value, k), e)
+            for k, e in enumerate(elems)]
+
+
+def _vector_at(builder: ir.IRBuilder, ptr: ir.Value, i: ir.Value, vty: ir.VectorType
+               ) -> ir.Value:
+    """&ptr[i] as a pointer to a vector of vty."""
+    return builder.bitcast(builder.gep(ptr, [i]), ir.PointerType(vty))
+
+
+def _arrays_of(ty, want: tuple) -> bool:
+    """Whether ty is a tuple of C-order arrays of the (dtype, ndim) in ``want``."""
+    return (isinstance(ty, types.BaseTuple) and len(ty) == len(want)
+            and all(isinstance(t, types.Array) and t.layout == "C" and (t.dtype, t.ndim) == w
+                    for t, w in zip(ty, want, strict=True)))
+
+
+def _array_of(ty, dtype, ndim: int) -> bool:
+    return isinstance(ty, types.Array) and ty.layout == "C" and (ty.dtype, ty.ndim) == (
+        dtype, ndim)
+
+
+def _records(ty) -> bool:
+    """Object records as the stream kernels take them: [N, 8] float64, or float32 ("fast"
+    precision), typed so that a kernel holding both branches compiles, and left at once."""
+    return _array_of(ty, types.float64, 2) or _array_of(ty, types.float32, 2)
+
+
+# The candidates' stream (pairs.candidate_pairs): per entry the light row and the object
+# row (int32 each); its results: P (float64) and whether the pair affects (uint8).
+_STREAM = ((types.int32, 1), (types.int32, 1))
+_STREAM_OUT = ((types.float64, 1), (types.uint8, 1))
+_V8I8 = ir.VectorType(_I8, LANES)
+
+
+@intrinsic(prefer_literal=False)
+def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
+    """The candidates of the object rows o0..o1-1 laid end to end as one stream, the input
+    of stream_run: cands = (seg [N, 2] (start, length), light row int32 [C]), the lists
+    of scheduler._Candidates (rooms with space to grow, so not contiguous); recs = (box,
+    its integer view) the records in row order, whose mask 0 (out of view) leaves an
+    object out. stream = (light row, object row) gets the entries, starts [o1 - o0 + 1]
+    where each object's begin (the last: the end). Returns the stream's length; -1 for
+    float32 records ("fast": the caller runs its per-object loop). Eight entries a step,
+    stored whole, so the stream needs 8 entries of room past its end; an object of more
+    than 8 candidates (a fifth in the city) takes further steps."""
+    if not (_arrays_of(cands, ((types.int64, 2), (types.int32, 1)))
+            and isinstance(recs, types.BaseTuple) and len(recs) == 2 and _records(recs[0])
+            and isinstance(recs[1], types.Array) and recs[1].ndim == 2
+            and recs[1].layout == "C" and isinstance(recs[1].dtype, types.Integer)
+            and recs[1].dtype.bitwidth == recs[0].dtype.bitwidth
+            and _arrays_of(stream, _STREAM) and _array_of(starts, types.int64, 1)):
+        return None
+    sig = types.int64(cands, recs, types.int64, types.int64, stream, starts)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[1][0].dtype != types.float64:
+            return ir.Constant(_I64, -1)
+        b = builder
+        seg_ptr, cj_ptr = _tuple_data(context, b, signature.args[0], args[0], (_I64, _I32))
+        bits_ptr = _data(context, b, signature.args[1][1], b.extract_value(args[1], 1), _I64)
+        sj_ptr, so_ptr = _tuple_data(context, b, signature.args[4], args[4], (_I32, _I32))
+        st_ptr = _data(context, b, signature.args[5], args[5], _I64)
+        o0_, o1_ = args[2], args[3]
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        zero = ir.Constant(_I64, 0)
+        step = ir.Constant(_I64, LANES)
+        n_slot = cgutils.alloca_once_value(b, zero)
+
+        def copy(at, src, k, ln, o32):
+            lanes = b.icmp_signed("<", iota, _splat(b, b.sub(ln, k), _VI64))
+            rows = _masked_load(b, _vector_at(b, cj_ptr, b.add(src, k), _VI32), lanes,
+                                ir.Constant(_VI32, [0] * LANES))
+            b.store(rows, _vector_at(b, sj_ptr, b.add(at, k), _VI32), align=4)
+            b.store(o32, _vector_at(b, so_ptr, b.add(at, k), _VI32), align=4)
+
+        with cgutils.for_range_slice(b, o0_, o1_, ir.Constant(_I64, 1)) as (o, _):
+            at = b.load(n_slot)
+            b.store(at, b.gep(st_ptr, [b.sub(o, o0_)]))
+            two = b.mul(o, ir.Constant(_I64, 2))
+            src = b.load(b.gep(seg_ptr, [two]))
+            ln = b.load(b.gep(seg_ptr, [b.add(two, ir.Constant(_I64, 1))]))
+            ob = b.load(b.gep(bits_ptr, [b.add(b.mul(o, ir.Constant(_I64, RECORD)),
+                                               ir.Constant(_I64, 6))]))
+            # An object out of view keeps its list but pairs with none.
+            ln = b.select(b.icmp_unsigned("!=", ob, zero), ln, zero)
+            o32 = _splat(b, b.trunc(o, _I32), _VI32)
+            # The first step whatever the length: no branch for the four objects in five
+            # of at most eight candidates.
+            copy(at, src, zero, ln, o32)
+            with b.if_then(b.icmp_signed(">", ln, step), likely=False):
+                with cgutils.for_range_slice(b, step, ln, step) as (k, _):
+                    copy(at, src, k, ln, o32)
+            b.store(b.add(at, ln), n_slot)
+        n = b.load(n_slot)
+        b.store(n, b.gep(st_ptr, [b.sub(o1_, o0_)]))
+        return n
+
+    return sig, codegen
+
+
+@intrinsic(prefer_literal=False)
+def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
+    """The stream's first n entries (stream_fill), eight a step whatever object each
+    belongs to: candidate_run's rule lane by lane, with the object's record loaded and
+    transposed per lane as the light's row is. A point light's pair gets out = (P, 1); a
+    pair that fails gets hit 0; a spot light in range gets hit 0 here and its entry's index
+    appended to ``spots`` (stream_spots decides it): its cone and spot factor are three
+    square roots and three divisions on eight lanes, for the one lane in ten that is a
+    spot, so they run on eight spots a step. Returns the spots listed. box [N, 8] float64
+    records in row order, hot light_hot [L, 8], compete bool [L]."""
+    if not (_records(box) and _array_of(hot, types.float64, 2)
+            and _array_of(compete, types.boolean, 1) and _arrays_of(stream, _STREAM)
+            and _arrays_of(out, _STREAM_OUT) and _array_of(spots, types.int32, 1)):
+        return None
+    sig = types.int64(box, hot, compete, stream, types.int64, out, spots)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[0].dtype != types.float64:
+            return ir.Constant(_I64, -1)
+        b = builder
+        box_ptr = _data(context, b, signature.args[0], args[0], _F64)
+        hot_ptr = _data(context, b, signature.args[1], args[1], _F64)
+        comp_ptr = _data(context, b, signature.args[2], args[2], _I8)
+        sj_ptr, so_ptr = _tuple_data(context, b, signature.args[3], args[3], (_I32, _I32))
+        sp_ptr, sh_ptr = _tuple_data(context, b, signature.args[5], args[5], (_F64, _I8))
+        spots_ptr = _data(context, b, signature.args[6], args[6], _I32)
+        n_ = args[4]
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        iota32 = ir.Constant(_VI32, list(range(LANES)))
+        zero32 = ir.Constant(_VI32, [0] * LANES)
+        ns_slot = cgutils.alloca_once_value(b, ir.Constant(_I64, 0))
+        with cgutils.for_range_slice(b, ir.Constant(_I64, 0), n_, ir.Constant(_I64, LANES)
+                                     ) as (i, _):
+            lanes = b.icmp_signed("<", iota, _splat(b, b.sub(n_, i), _VI64))
+            rows32 = _masked_load(b, _vector_at(b, sj_ptr, i, _VI32), lanes, zero32)
+            objs32 = _masked_load(b, _vector_at(b, so_ptr, i, _VI32), lanes, zero32)
+            # Lanes past the end read light row 0 and object row 0, which exist.
+            light = _Run.fields_at(b, hot_ptr, b.sext(rows32, _VI64))
+            f = _Run.fields_at(b, box_ptr, b.sext(objs32, _VI64))
+            run = _Run(b, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            comp = _at_rows(b, comp_ptr, rows32)
+            live = b.and_(lanes, b.icmp_unsigned("!=", comp, ir.Constant(_V8I8, [0] * LANES)))
+            hit, d2 = run.hits(f, live)
+            spot = _is_spot(b, light[5])
+            point = b.and_(hit, b.not_(spot))
+            # P * s with s = 1, as candidate_run has it: the same bits as P.
+            p = b.fadd(b.fmul(run.priority(d2, f[7], point), run.one), run.p_user)
+            _masked_store(b, p, _vector_at(b, sp_ptr, i, _VF), lanes)
+            _masked_store(b, b.zext(point, _V8I8), _vector_at(b, sh_ptr, i, _V8I8), lanes)
+            in_range = b.and_(hit, spot)
+            count = b.zext(b.call(run.popcount, [b.bitcast(in_range, _I8)]), _I64)
+            ns = b.load(ns_slot)
+            at = b.add(_splat(b, b.trunc(i, _I32), _VI32), iota32)
+            run.append(at, in_range, b.gep(spots_ptr, [ns]), count)
+            b.store(b.add(ns, count), ns_slot)
+        return b.load(ns_slot)
+
+    return sig, codegen
+
+
+@intrinsic(prefer_literal=False)
+def stream_spots(typingctx, box, lights, stream, spots, n, out):
+    """The spot lights' entries stream_run listed (spots[:n], indices into the stream, all
+    in range and competing with a mask bit of the object's): the cone and P = falloff * s
+    + p_user as candidate_run has them (priority.spot_cone on the bounding sphere), eight
+    a step; each entry's out = (P, whether the cone meets the object). lights =
+    (light_hot, light_f) [L, 8] float64; the rest as stream_run."""
+    if not (_records(box) and _arrays_of(lights, ((types.float64, 2), (types.float64, 2)))
+            and _arrays_of(stream, _STREAM) and _array_of(spots, types.int32, 1)
+            and _arrays_of(out, _STREAM_OUT)):
+        return None
+    sig = types.void(box, lights, stream, spots, types.int64, out)
+
+    def codegen(context, builder, signature, args):
+        if signature.args[0].dtype != types.float64:
+            return context.get_dummy_value()
+        b = builder
+        box_ptr = _data(context, b, signature.args[0], args[0], _F64)
+        hot_ptr, lf_ptr = _tuple_data(context, b, signature.args[1], args[1], (_F64, _F64))
+        sj_ptr, so_ptr = _tuple_data(context, b, signature.args[2], args[2], (_I32, _I32))
+        spots_ptr = _data(context, b, signature.args[3], args[3], _I32)
+        sp_ptr, sh_ptr = _tuple_data(context, b, signature.args[5], args[5], (_F64, _I8))
+        n_ = args[4]
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        with cgutils.for_range_slice(b, ir.Constant(_I64, 0), n_, ir.Constant(_I64, LANES)
+                                     ) as (i, _):
+            lanes = b.icmp_signed("<", iota, _splat(b, b.sub(n_, i), _VI64))
+            # Lanes past the end take entry 0 (there are spots, so a stream) and store
+            # nothing.
+            at = _masked_load(b, _vector_at(b, spots_ptr, i, _VI32), lanes,
+                              ir.Constant(_VI32, [0] * LANES))
+            rows = b.sext(_at_rows(b, sj_ptr, at), _VI64)
+            f = _Run.fields_at(b, box_ptr, b.sext(_at_rows(b, so_ptr, at), _VI64))
+            light = _Run.fields_at(b, hot_ptr, rows)
+            run = _Run(b, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            hit, d2 = run.hits(f, lanes)
+            meets, s = run.cone(f, _Run.fields_at(b, lf_ptr, rows)[:6])
+            hit = b.and_(hit, meets)
+            p = b.fadd(b.fmul(run.priority(d2, f[7], hit), s), run.p_user)
+            for k in range(LANES):
+                lane = ir.Constant(_I32, k)
+                with b.if_then(b.extract_element(lanes, lane), likely=True):
+                    entry = b.sext(b.extract_element(at, lane), _I64)
+                    b.store(b.extract_element(p, lane), b.gep(sp_ptr, [entry]))
+                    b.store(b.zext(b.extract_element(hit, lane), _I8), b.gep(sh_ptr, [entry]))
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic(prefer_literal=False)
+def stream_pack(typingctx, stream, out, n, heap, base, before):
+    """The pairs among the stream's first n entries (out's hit set) packed, in stream
+    order, into heap = (P, light row) from ``base``: a compress store of eight entries a
+    step. before[i] = the pairs before entry i (before[n]: all), from which each object's
+    segment follows (pairs.candidate_pairs). Returns the pairs."""
+    if not (_arrays_of(stream, _STREAM) and _arrays_of(out, _STREAM_OUT)
+            and _arrays_of(heap, ((types.float64, 1), (types.int32, 1)))
+            and _array_of(before, types.int64, 1)):
+        return None
+    sig = types.int64(stream, out, types.int64, heap, types.int64, before)
+
+    def codegen(context, builder, signature, args):
+        b = builder
+        sj_ptr, _ = _tuple_data(context, b, signature.args[0], args[0], (_I32, _I32))
+        sp_ptr, sh_ptr = _tuple_data(context, b, signature.args[1], args[1], (_F64, _I8))
+        hp_ptr, hj_ptr = _tuple_data(context, b, signature.args[3], args[3], (_F64, _I32))
+        before_ptr = _data(context, b, signature.args[5], args[5], _I64)
+        n_, base = args[2], args[4]
+        iota = ir.Constant(_VI64, list(range(LANES)))
+        zeros = ir.Constant(_VI64, [0] * LANES)
+        popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
+        m_slot = cgutils.alloca_once_value(b, ir.Constant(_I64, 0))
+        with cgutils.for_range_slice(b, ir.Constant(_I64, 0), n_, ir.Constant(_I64, LANES)
+                                     ) as (i, _):
+            lanes = b.icmp_signed("<", iota, _splat(b, b.sub(n_, i), _VI64))
+            h = _masked_load(b, _vector_at(b, sh_ptr, i, _V8I8), lanes,
+                             ir.Constant(_V8I8, [0] * LANES))
+            hit = b.icmp_unsigned("!=", h, ir.Constant(_V8I8, [0] * LANES))
+            p = _masked_load(b, _vector_at(b, sp_ptr, i, _VF), hit,
+                             ir.Constant(_VF, [0.0] * LANES))
+            j = _masked_load(b, _vector_at(b, sj_ptr, i, _VI32), hit,
+                             ir.Constant(_VI32, [0] * LANES))
+            m = b.load(m_slot)
+            count = b.zext(b.call(popcount, [b.bitcast(hit, _I8)]), _I64)
+            at = b.add(base, m)
+            _compress_store(b, p, hit, b.gep(hp_ptr, [at]), count, PACK_IN_REGISTER)
+            _compress_store(b, j, hit, b.gep(hj_ptr, [at]), count, PACK_IN_REGISTER)
+            # Pairs before each lane: m plus an exclusive prefix sum of the hits.
+            one = b.zext(hit, _VI64)
+            total = one
+            for shift in (1, 2, 4):
+                moved = b.shuffle_vector(total, zeros, ir.Constant(
+                    _VI32, [LANES if k < shift else k - shift for k in range(LANES)]))
+                total = b.add(total, moved)
+            _masked_store(b, b.add(b.sub(total, one), _splat(b, m, _VI64)),
+                          _vector_at(b, before_ptr, i, _VI64), lanes)
+            b.store(b.add(m, count), m_slot)
+        m = b.load(m_slot)
+        b.store(m, b.gep(before_ptr, [n_]))
+        return m
 
     return sig, codegen
 
@@ -863,4 +1153,5 @@ def prefetch_row(typingctx, table, row):
 
 
 __all__ = ["LANES", "PACK_IN_REGISTER", "candidate_run", "held_row", "point_priority",
-           "point_run", "prefetch_row", "spot_priority", "target_features"]
+           "point_run", "prefetch_row", "spot_priority", "stream_fill", "stream_pack",
+           "stream_run", "stream_spots", "target_features"]

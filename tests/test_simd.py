@@ -4,9 +4,10 @@ point light's branch of pairs._exact_pair), bit for bit, on generated records an
 point_run alone == the range test and the mask (the hits' positions and d2, which the
 light pass finishes for other lights); simd.spot_priority == the spot branch;
 simd.candidate_run (one object against its candidate point and spot lights) == the scalar
-loop of pairs.candidate_pairs. With both ways of packing the lanes (an AVX-512 register
-where the target has it, the portable compress store), and without a store past the pairs
-they append."""
+loop of pairs.candidate_pairs, and so does candidate_pairs' stream of every object's
+candidates (simd.stream_fill, stream_run, stream_spots, stream_pack). With both ways of
+packing the lanes (an AVX-512 register where the target has it, the portable compress
+store), and without a store past the pairs they append."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import _finish_hits, object_pass, visible_objects
+from lightsched.pairs import OBJECT_CHUNK, _finish_hits, candidate_pairs, object_pass, visible_objects
 from lightsched.pairs import scalar_candidates as pairs_scalar
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
 from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
@@ -515,6 +516,107 @@ def test_candidate_run_on_objects_around_spots_and_points(packing):
     assert {(POINT, True, True), (SPOT, True, True), (SPOT, False, False)} <= kinds
 
 
+class _Packing:
+    """Kernels compiled inside take the given packing (read when an intrinsic is lowered,
+    i.e. at a fresh dispatcher's first call)."""
+
+    def __init__(self, packing: bool):
+        self.packing = packing
+
+    def __enter__(self):
+        self.before = simd.PACK_IN_REGISTER
+        simd.PACK_IN_REGISTER = self.packing
+
+    def __exit__(self, *exc):
+        simd.PACK_IN_REGISTER = self.before
+
+
+# candidate_pairs compiled afresh per packing (and record dtype), on first use.
+STREAMS = {packing: nb.njit(parallel=True, nogil=True, error_model="numpy")(
+    candidate_pairs.py_func) for packing in PACKINGS}
+
+
+def candidate_scene(rng, n, n_l, dtype=np.float64):
+    """candidate_pairs' arguments for n objects (some out of view: mask 0 in the record;
+    some of zero extent, some large) and n_l point and spot lights round them, each object
+    with a list of 0..24 distinct lights in a room with garbage after it, as
+    scheduler._Candidates keeps them."""
+    centre = rng.normal(size=(n, 3)) * 15.0
+    half = rng.choice([0.0, 0.5, 2.0, 12.0], size=(n, 1)) * rng.uniform(0, 1, (n, 3))
+    masks = rng.choice(np.array([0xFFFFFFFF, 1, 2, 0], np.uint32), n, p=[0.6, 0.15, 0.15, 0.1])
+    recs = np.zeros((n, 8), dtype)
+    bits = recs.view(np.int32 if dtype == np.float32 else np.int64)
+    visible_objects(centre - half, centre + half, masks, np.arange(n), n, (recs, bits),
+                    np.zeros(3))
+    hot = np.zeros((n_l, 8))
+    lf = np.zeros((n_l, 8))
+    typ = np.where(rng.uniform(size=n_l) < 0.3, SPOT, POINT)
+    hot[:, :3] = rng.normal(size=(n_l, 3)) * 12.0
+    hot[:, 3] = rng.uniform(1.0, 30.0, n_l)
+    hot[:, 4] = rng.choice([float(0xFFFFFFFF), 1.0, 2.0], n_l)
+    hot[:, 5] = np.arange(n_l) * 32 + typ * 8
+    hot[:, 6] = rng.uniform(0.0, 50.0, n_l)
+    hot[:, 7] = rng.choice([0.0, 0.5, -1.0], n_l)
+    axis = rng.normal(size=(n_l, 3))
+    lf[:, :3] = axis / np.linalg.norm(axis, axis=1, keepdims=True)
+    outer = rng.uniform(0.2, 1.4, n_l)
+    inner = np.where(rng.uniform(size=n_l) < 0.5, outer, outer * 0.5)
+    lf[:, 3], lf[:, 4] = np.cos(outer), np.sin(outer)
+    lf[:, 5] = np.where(inner == outer, np.nan, np.cos(inner))
+    compete = rng.uniform(size=n_l) < 0.85
+    lengths = np.minimum(rng.choice([0, 3, 6, 9, 17, 24], n) + rng.integers(0, 3, n), n_l)
+    seg = np.zeros((n, 2), np.int64)
+    c_j = []
+    for o in range(n):
+        seg[o] = len(c_j), lengths[o]
+        c_j += rng.permutation(n_l)[:lengths[o]].tolist()
+        c_j += rng.integers(0, n_l, rng.integers(0, 4)).tolist()  # the room's spare end
+    c_j = np.array(c_j + [0], np.int32)
+    return (seg, c_j), (recs, bits), (hot, lf), compete
+
+
+def check_stream(rng, n, n_l):
+    """candidate_pairs (each packing) on candidate_scene(rng, n, n_l) in float64 and
+    float32 records == the scalar loop, object by object."""
+    for dtype in (np.float64, np.float32):
+        cands, recs, lights, compete = candidate_scene(rng, n, n_l, dtype)
+        seg, c_j = cands
+        params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
+        room = int(seg[:, 1].sum())
+        for packing, kernel in STREAMS.items():
+            out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
+                   np.full(room + 1, SENTINEL_ROW, np.int32))
+            with _Packing(packing):
+                assert kernel(cands, recs, lights, compete, np.zeros(0, np.int64), params,
+                              out) == room
+            o_seg, o_p, o_j = out
+            for o in range(n):
+                want = (np.zeros(n_l), np.zeros(n_l, np.int32))
+                ob = np.int64(recs[1][o, 6])
+                end = pairs_scalar(recs[0], ob, o, lights, compete, c_j, seg[o, 0],
+                                   seg[o, 0] + (seg[o, 1] if ob else 0), want, 0, params)
+                a, m = o_seg[o]
+                assert m == end, (packing, dtype, o)
+                assert np.array_equal(o_p[a:a + m].view(np.int64), want[0][:m].view(np.int64))
+                assert np.array_equal(o_j[a:a + m], want[1][:m])
+                # Within the room of its chunk: the chunks run in parallel.
+                c0 = o // OBJECT_CHUNK * OBJECT_CHUNK
+                c1 = min(n, c0 + OBJECT_CHUNK)
+                assert seg[:c0, 1].sum() <= a and a + m <= seg[:c1, 1].sum()
+            assert o_j[room] == SENTINEL_ROW
+
+
+@examples(1.0)
+@given(seed=st.integers(0, 2**32 - 1), n=st.sampled_from([1, 7, OBJECT_CHUNK, 600]),
+       n_l=st.integers(1, 40))
+def test_candidate_pairs_stream_equals_the_scalar_loop(seed, n, n_l):
+    """candidate_pairs' stream (whole chunks of objects, eight candidates of any objects a
+    step, the spots' cones after them, the pairs packed per chunk) gives each object the
+    scalar loop's pairs in candidate order, P bit for bit, within its chunk's room; and
+    with float32 records ("fast") the per-object loop gives them too."""
+    check_stream(np.random.default_rng(seed), n, n_l)
+
+
 def test_candidate_run_leaves_float32_records_to_the_scalar_loop():
     """"fast" precision's float32 records: -1 and nothing written."""
     out_p, out_j = np.full(4, SENTINEL_P), np.full(4, SENTINEL_ROW, np.int32)
@@ -626,6 +728,8 @@ for o in range(n):
     k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
     assert CANDIDATES[False](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+from test_simd import check_stream
+check_stream(np.random.default_rng(11), 600, 40)
 from test_simd import HELD, HELD_KINDS, check_held, held_case
 assert "zmm" not in "".join(HELD[False].inspect_asm().values())
 rng = np.random.default_rng(7)
@@ -637,8 +741,9 @@ print("ok")
 
 def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
     """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
-    packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run and
-    candidate_run) and the scalar path's slots (held_row, inside object_pass and alone)."""
+    packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run,
+    candidate_run and candidate_pairs' stream) and the scalar path's slots (held_row,
+    inside object_pass and alone)."""
     import os
     import subprocess
     import sys
