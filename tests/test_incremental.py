@@ -177,6 +177,35 @@ def test_lights_and_objects_cross_the_edge_of_the_view():
             assert _plan(f).startswith("incremental"), f.stats["plan"]
 
 
+def test_full_frames_leave_the_rows_of_objects_long_out_of_view_as_they_are():
+    """Every light moving (full frames) under a narrow camera turning left and right: the
+    rows of objects out of view in this frame and the two before are empty in the arrays
+    the frame takes back, and are not written again (the plan says how many); an object
+    that left the view a frame or two ago is still recomputed (its row, and its selection,
+    which a strong hysteresis reads when it comes back), and every frame is the
+    oracle's."""
+    t, lights, _, _ = _twin(ls.Config(max_lights=2, fade_in=0.05, fade_out=0.05,
+                                      hysteresis=3.0))
+    skipped = []
+    for a in [0.0, -0.5, -0.5, 0.5, 0.5, 0.5, 0.0, -0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5]:
+        cam = ls.Camera(position=np.array([0.0, 0.0, -20.0]),
+                        forward=np.array([math.sin(a), 0.0, math.cos(a)]),
+                        up=np.array([0.0, 1.0, 0.0]), fov_y=0.5, aspect=1.0, near=0.5,
+                        far=120.0)
+        lights["position"] += 0.3
+        t.update_lights(id=lights["id"], position=lights["position"])
+        f, _ = t.frame([cam], dt=0.02)
+        assert _plan(f).startswith("full:"), f.stats["plan"]
+        found = re.search(r"(\d+) objects out of view keep their empty rows",
+                          f.stats["plan"]["lists"])
+        skipped.append(int(found.group(1)) if found else 0)
+        n = f.object_id.size
+        assert f.stats["counts"]["recomputed_objects"] == n - skipped[-1]
+        del f
+    # From the third frame on, with objects out of view throughout.
+    assert skipped[:2] == [0, 0] and min(skipped[2:]) > 0, skipped
+
+
 def test_a_cut_restarts_the_fades_without_recomputing_pairs():
     t, lights, _, cams = _twin(ls.Config(max_lights=2))
     t.frame(cams)
