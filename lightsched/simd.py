@@ -56,6 +56,7 @@ from .scene import FADING_IN, ON, SPOT
 
 LANES = 8
 RECORD = 8  # float64 words per object record
+STREAM_AHEAD = 32  # stream_run prefetches the light rows of the entries this far ahead
 
 _F64 = ir.DoubleType()
 _I64 = ir.IntType(64)
@@ -684,12 +685,18 @@ def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
 def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
     """The stream's first n entries (stream_fill), eight a step whatever object each
     belongs to: candidate_run's rule lane by lane, with the object's record loaded and
-    transposed per lane as the light's row is. A point light's pair gets out = (P, 1); a
-    pair that fails gets hit 0; a spot light in range gets hit 0 here and its entry's index
-    appended to ``spots`` (stream_spots decides it): its cone and spot factor are three
-    square roots and three divisions on eight lanes, for the one lane in ten that is a
-    spot, so they run on eight spots a step. Returns the spots listed. box [N, 8] float64
-    records in row order, hot light_hot [L, 8], compete bool [L]."""
+    transposed per lane as the light's row is. The light rows of the entries STREAM_AHEAD
+    on are prefetched: they are rows at random, and at (1M, 100k), where light_hot is 6.4
+    MB, half of the pass's samples waited on them (bench/kernel_profile.py; on captured
+    inputs -0.3..-5 ms of 24..40, the more the slower the machine's memory was that hour;
+    at (100k, 10k) -0.13..-0.2 ms of 2.4, at (10k, 1k) nothing).
+
+    A point light's pair gets out = (P, 1); a pair that fails gets hit 0; a spot light in
+    range gets hit 0 here and its entry's index appended to ``spots`` (stream_spots decides
+    it): its cone and spot factor are three square roots and three divisions on eight
+    lanes, for the one lane in ten that is a spot, so they run on eight spots a step.
+    Returns the spots listed. box [N, 8] float64 records in row order (float32: -1 at
+    once, nothing written), hot light_hot [L, 8], compete bool [L]."""
     if not (_records(box) and _array_of(hot, types.float64, 2)
             and _array_of(compete, types.boolean, 1) and _arrays_of(stream, _STREAM)
             and _arrays_of(out, _STREAM_OUT) and _array_of(spots, types.int32, 1)):
@@ -714,6 +721,13 @@ def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
         with cgutils.for_range_slice(b, ir.Constant(_I64, 0), n_, ir.Constant(_I64, LANES)
                                      ) as (i, _):
             lanes = b.icmp_signed("<", iota, _splat(b, b.sub(n_, i), _VI64))
+            ahead = b.add(i, ir.Constant(_I64, STREAM_AHEAD))
+            with b.if_then(b.icmp_signed("<=", b.add(ahead, ir.Constant(_I64, LANES)), n_),
+                           likely=True):
+                for k in range(LANES):
+                    row = b.load(b.gep(sj_ptr, [b.add(ahead, ir.Constant(_I64, k))]))
+                    _prefetch(b, b.gep(hot_ptr, [b.mul(b.sext(row, _I64),
+                                                       ir.Constant(_I64, RECORD))]))
             rows32 = _masked_load(b, _vector_at(b, sj_ptr, i, _VI32), lanes, zero32)
             objs32 = _masked_load(b, _vector_at(b, so_ptr, i, _VI32), lanes, zero32)
             # Lanes past the end read light row 0 and object row 0, which exist.
@@ -1126,6 +1140,14 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     return sig, codegen
 
 
+def _prefetch(builder: ir.IRBuilder, ptr: ir.Value) -> None:
+    """Asks the cache for the line at ``ptr`` without waiting (never faults)."""
+    fn = _declare(builder, "llvm.prefetch.p0", ir.VoidType(),
+                  [ir.PointerType(_I8), _I32, _I32, _I32])
+    builder.call(fn, [builder.bitcast(ptr, ir.PointerType(_I8)), ir.Constant(_I32, 0),
+                      ir.Constant(_I32, 3), ir.Constant(_I32, 1)])
+
+
 @intrinsic(prefer_literal=False)
 def prefetch_row(typingctx, table, row):
     """Asks the cache for the start of ``table[row]`` (a C-order 2-D array) without waiting
@@ -1142,11 +1164,7 @@ def prefetch_row(typingctx, table, row):
         stride = builder.extract_value(ary.strides, 0)
         at = builder.mul(context.cast(builder, args[1], signature.args[1], types.int64),
                          stride)
-        ptr = builder.gep(builder.bitcast(ary.data, ir.PointerType(_I8)), [at])
-        fn = _declare(builder, "llvm.prefetch.p0", ir.VoidType(),
-                      [ir.PointerType(_I8), _I32, _I32, _I32])
-        builder.call(fn, [ptr, ir.Constant(_I32, 0), ir.Constant(_I32, 3),
-                          ir.Constant(_I32, 1)])
+        _prefetch(builder, builder.gep(builder.bitcast(ary.data, ir.PointerType(_I8)), [at]))
         return context.get_dummy_value()
 
     return sig, codegen
