@@ -904,18 +904,19 @@ def start_at(rows, obj, n):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
-    """The pairs of every object row from its candidate lights (scheduler._Candidates: the
-    point and spot lights whose sphere, widened by a skin, reached it when its list was
-    made, and which still lies inside that widened sphere): per candidate that competes,
-    the exact Affects test and P (_pair_p, as the light pass), then the competing
-    directional lights ``dir_rows``. So a frame whose lights moved within their skins
-    walks no grid and groups nothing, and finds the same pairs (bench/RESULTS.md, Next 10
-    and ebb5ec0: the pairs and lists stages of a full (100k, 10k) frame 8.3 -> 6.6 ms,
-    the lists' upkeep included).
+def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, used):
+    """The pairs of the object ``rows`` (int64, ascending; empty: every row) from their
+    candidate lights (scheduler._Candidates: the point and spot lights whose sphere,
+    widened by a skin, reached the object when its list was made, and which still lies
+    inside that widened sphere): per candidate that competes, the exact Affects test and P
+    (_pair_p, as the light pass), then the competing directional lights ``dir_rows``. So a
+    frame whose lights moved within their skins walks no grid and groups nothing, and
+    finds the same pairs (bench/RESULTS.md, Next 10 and ebb5ec0: the pairs and lists
+    stages of a full (100k, 10k) frame 8.3 -> 6.6 ms, the lists' upkeep included); an
+    incremental frame, those of the objects a changed light may reach.
 
     Under the contribution model with float64 records and no directional light in the
-    slots, each chunk of objects runs as a stream (_stream_chunk): its candidates laid end
+    slots, each chunk of rows runs as a stream (_stream_chunk): their candidates laid end
     to end and taken eight a step in vector code whatever object each belongs to, the spot
     lights' cones eight at a time after them, then the pairs packed into the chunk's room.
     Object by object (candidate_run, eight candidates of one object a step), a step held
@@ -928,38 +929,47 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
 
     cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
     integer view): the grid's records in object row order; lights = (light_hot, light_f);
-    params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]) with H
-    at least the candidates plus N * len(dir_rows). Fills out, each object's pairs in
-    candidate order within the room of its chunk of objects (the candidates, plus
-    len(dir_rows) per object), and returns the records those rooms take."""
+    params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]), the
+    heap's records from ``used`` on free for at least the rows' candidates plus
+    len(dir_rows) per row. Writes the rows' segments, each object's pairs in candidate
+    order within the room of its chunk of rows, and returns the end of those rooms."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
     o_seg, o_p, o_j = out
     model = int(params[0])
-    n = c_seg.shape[0]
+    every = rows.shape[0] == 0
+    n_rows = c_seg.shape[0] if every else rows.shape[0]
     n_dir = dir_rows.shape[0]
     # candidate_run and the stream read whole 8-word rows.
     vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
               and lf.shape[1] == 8)
     stream = vector and n_dir == 0
     far = hot.nbytes > PREFETCH_BYTES
-    room = 0
-    for o in range(n):
-        o_seg[o, 0] = room
-        room += c_seg[o, 1] + n_dir
-    n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    n_chunks = (n_rows + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    room = np.empty(n_chunks + 1, np.int64)
+    at = used
+    for ch in range(n_chunks):
+        room[ch] = at
+        for r in range(ch * OBJECT_CHUNK, min(n_rows, (ch + 1) * OBJECT_CHUNK)):
+            at += c_seg[r if every else rows[r], 1] + n_dir
+    room[n_chunks] = at
     for ch in nb.prange(n_chunks):
-        o0 = ch * OBJECT_CHUNK
-        o1 = min(n, o0 + OBJECT_CHUNK)
-        if stream and _stream_chunk(cands, recs, lights, compete, o0, o1, out):
+        r0 = ch * OBJECT_CHUNK
+        r1 = min(n_rows, r0 + OBJECT_CHUNK)
+        if stream and _stream_chunk(cands, recs, lights, compete, (rows, r0, r1),
+                                    room[ch:ch + 2], out):
             continue
-        for o in range(o0, o1):
-            m = o_seg[o, 0]
-            ahead = o + PREFETCH_OBJECTS
-            if far and ahead < n and bits[ahead, 6] != 0:
-                for t in range(c_seg[ahead, 0], c_seg[ahead, 0] + c_seg[ahead, 1]):
-                    prefetch_row(hot, c_j[t])
+        m = room[ch]
+        for r in range(r0, r1):
+            o = r if every else rows[r]
+            o_seg[o, 0] = m
+            ahead = r + PREFETCH_OBJECTS
+            if far and ahead < n_rows:
+                oa = ahead if every else rows[ahead]
+                if bits[oa, 6] != 0:
+                    for t in range(c_seg[oa, 0], c_seg[oa, 0] + c_seg[oa, 1]):
+                        prefetch_row(hot, c_j[t])
             ob = np.int64(bits[o, 6])
             # An object out of view (mask 0 in its record) keeps its list but pairs with none.
             a = c_seg[o, 0]
@@ -979,41 +989,43 @@ def candidate_pairs(cands, recs, lights, compete, dir_rows, params, out):
                     o_j[m] = j
                     m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
-    return room
+    return at
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _stream_chunk(cands, recs, lights, compete, o0, o1, out):
-    """candidate_pairs' vector path for the object rows o0..o1-1 (no directional light in
-    the slots): their candidates laid end to end (simd.stream_fill), the exact test and P
-    eight entries a step (stream_run), the spots in range eight a step (stream_spots),
-    the pairs packed from the chunk's room on (stream_pack), each object's segment from
-    the pairs before its first entry. The same pairs, in the same order and bits, as
-    candidate_run object by object. Returns False, having written nothing, for float32
-    records. out as candidate_pairs', whose o_seg[o0, 0] holds the chunk's room."""
-    c_seg, _ = cands
-    box = recs[0]
+def _stream_chunk(cands, recs, lights, compete, span, room, out):
+    """candidate_pairs' vector path for the object rows of span = (rows, r0, r1) (rows[r0:
+    r1], or r0..r1-1 when rows is empty; no directional light in the slots): their
+    candidates laid end to end (simd.stream_fill), the exact test and P eight entries a
+    step (stream_run), the spots in range eight a step (stream_spots), the pairs packed
+    from room[0] on (stream_pack; room[1]: the end of the chunk's room), each object's
+    segment from the pairs before its first entry. The same pairs, in the same order and
+    bits, as candidate_run object by object. Returns False, having written nothing, for
+    float32 records. out as candidate_pairs'."""
+    rows, r0, r1 = span
     o_seg, o_p, o_j = out
-    base = o_seg[o0, 0]
-    size = o_seg[o1 - 1, 0] + c_seg[o1 - 1, 1] - base
+    base = room[0]
     # Each step stores eight entries whole: room for one more step.
-    ints = np.empty((3, size + LANES), np.int32)
+    ints = np.empty((3, room[1] - base + LANES), np.int32)
     stream = (ints[0], ints[1])
     spots = ints[2]
-    starts = np.empty(o1 - o0 + 1, np.int64)
-    n_s = stream_fill(cands, recs, o0, o1, stream, starts)
+    starts = np.empty(r1 - r0 + 1, np.int64)
+    n_s = stream_fill(cands, recs, rows, r0, r1, stream, starts)
     if n_s < 0:
         return False
+    box = recs[0]
     results = (np.empty(n_s + LANES), np.empty(n_s + LANES, np.uint8))
     n_spots = stream_run(box, lights[0], compete, stream, n_s, results, spots)
     if n_spots:
         stream_spots(box, lights, stream, spots, n_spots, results)
     before = np.empty(n_s + LANES + 1, np.int64)
     stream_pack(stream, results, n_s, (o_p, o_j), base, before)
-    for o in range(o0, o1):
-        a = before[starts[o - o0]]
+    every = rows.shape[0] == 0
+    for r in range(r0, r1):
+        o = r if every else rows[r]
+        a = before[starts[r - r0]]
         o_seg[o, 0] = base + a
-        o_seg[o, 1] = before[starts[o - o0 + 1]] - a
+        o_seg[o, 1] = before[starts[r - r0 + 1]] - a
     return True
 
 

@@ -135,6 +135,9 @@ CANDIDATE_LISTS = True
 # before it 10k was +-0.08, so the threshold was 2^15).
 CANDIDATE_MIN_OBJECTS = 1 << 12
 
+# pairs.candidate_pairs' rows for "every row".
+_EVERY_ROW = np.zeros(0, np.int64)
+
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
 
@@ -587,8 +590,8 @@ class Scheduler(SceneAPI):
             room = int(c_seg[:, 1].sum()) + n * dir_rows.size
             seg = np.empty((n, 2), np.int64)
             heap = self._new_heap(room)
-            used = int(candidate_pairs((c_seg, c_j), cands.recs, packed, compete, dir_rows,
-                                       p_params, (seg, *heap)))
+            used = int(candidate_pairs(_EVERY_ROW, (c_seg, c_j), cands.recs, packed, compete,
+                                       dir_rows, p_params, (seg, *heap), 0))
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "every pair from the objects' candidate lists, by object row"
         elif full:

@@ -616,24 +616,26 @@ _V8I8 = ir.VectorType(_I8, LANES)
 
 
 @intrinsic(prefer_literal=False)
-def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
-    """The candidates of the object rows o0..o1-1 laid end to end as one stream, the input
-    of stream_run: cands = (seg [N, 2] (start, length), light row int32 [C]), the lists
-    of scheduler._Candidates (rooms with space to grow, so not contiguous); recs = (box,
-    its integer view) the records in row order, whose mask 0 (out of view) leaves an
-    object out. stream = (light row, object row) gets the entries, starts [o1 - o0 + 1]
-    where each object's begin (the last: the end). Returns the stream's length; -1 for
-    float32 records ("fast": the caller runs its per-object loop). Eight entries a step,
-    stored whole, so the stream needs 8 entries of room past its end; an object of more
-    than 8 candidates (a fifth in the city) takes further steps."""
+def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
+    """The candidates of the object rows rows[r0:r1] (rows int64, ascending; empty: the
+    rows r0..r1-1 themselves) laid end to end as one stream, the input of stream_run:
+    cands = (seg [N, 2] (start, length), light row int32 [C]), the lists of
+    scheduler._Candidates (rooms with space to grow, so not contiguous); recs = (box, its
+    integer view) the records in row order, whose mask 0 (out of view) leaves an object
+    out. stream = (light row, object row) gets the entries, starts [r1 - r0 + 1] where
+    each object's begin (the last: the end). Returns the stream's length; -1 for float32
+    records ("fast": the caller runs its per-object loop). Eight entries a step, stored
+    whole, so the stream needs 8 entries of room past its end; an object of more than 8
+    candidates (a fifth in the city) takes further steps."""
     if not (_arrays_of(cands, ((types.int64, 2), (types.int32, 1)))
             and isinstance(recs, types.BaseTuple) and len(recs) == 2 and _records(recs[0])
             and isinstance(recs[1], types.Array) and recs[1].ndim == 2
             and recs[1].layout == "C" and isinstance(recs[1].dtype, types.Integer)
             and recs[1].dtype.bitwidth == recs[0].dtype.bitwidth
+            and _array_of(rows, types.int64, 1)
             and _arrays_of(stream, _STREAM) and _array_of(starts, types.int64, 1)):
         return None
-    sig = types.int64(cands, recs, types.int64, types.int64, stream, starts)
+    sig = types.int64(cands, recs, rows, types.int64, types.int64, stream, starts)
 
     def codegen(context, builder, signature, args):
         if signature.args[1][0].dtype != types.float64:
@@ -641,13 +643,17 @@ def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
         b = builder
         seg_ptr, cj_ptr = _tuple_data(context, b, signature.args[0], args[0], (_I64, _I32))
         bits_ptr = _data(context, b, signature.args[1][1], b.extract_value(args[1], 1), _I64)
-        sj_ptr, so_ptr = _tuple_data(context, b, signature.args[4], args[4], (_I32, _I32))
-        st_ptr = _data(context, b, signature.args[5], args[5], _I64)
-        o0_, o1_ = args[2], args[3]
+        rows_ary = context.make_array(signature.args[2])(context, b, args[2])
+        rows_ptr = b.bitcast(rows_ary.data, ir.PointerType(_I64))
+        every = b.icmp_signed("==", b.extract_value(rows_ary.shape, 0), ir.Constant(_I64, 0))
+        sj_ptr, so_ptr = _tuple_data(context, b, signature.args[5], args[5], (_I32, _I32))
+        st_ptr = _data(context, b, signature.args[6], args[6], _I64)
+        r0_, r1_ = args[3], args[4]
         iota = ir.Constant(_VI64, list(range(LANES)))
         zero = ir.Constant(_I64, 0)
         step = ir.Constant(_I64, LANES)
         n_slot = cgutils.alloca_once_value(b, zero)
+        o_slot = cgutils.alloca_once(b, _I64)
 
         def copy(at, src, k, ln, o32):
             lanes = b.icmp_signed("<", iota, _splat(b, b.sub(ln, k), _VI64))
@@ -656,9 +662,13 @@ def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
             b.store(rows, _vector_at(b, sj_ptr, b.add(at, k), _VI32), align=4)
             b.store(o32, _vector_at(b, so_ptr, b.add(at, k), _VI32), align=4)
 
-        with cgutils.for_range_slice(b, o0_, o1_, ir.Constant(_I64, 1)) as (o, _):
+        with cgutils.for_range_slice(b, r0_, r1_, ir.Constant(_I64, 1)) as (r, _):
             at = b.load(n_slot)
-            b.store(at, b.gep(st_ptr, [b.sub(o, o0_)]))
+            b.store(at, b.gep(st_ptr, [b.sub(r, r0_)]))
+            b.store(r, o_slot)
+            with b.if_then(b.not_(every), likely=False):
+                b.store(b.load(b.gep(rows_ptr, [r])), o_slot)
+            o = b.load(o_slot)
             two = b.mul(o, ir.Constant(_I64, 2))
             src = b.load(b.gep(seg_ptr, [two]))
             ln = b.load(b.gep(seg_ptr, [b.add(two, ir.Constant(_I64, 1))]))
@@ -675,7 +685,7 @@ def stream_fill(typingctx, cands, recs, o0, o1, stream, starts):
                     copy(at, src, k, ln, o32)
             b.store(b.add(at, ln), n_slot)
         n = b.load(n_slot)
-        b.store(n, b.gep(st_ptr, [b.sub(o1_, o0_)]))
+        b.store(n, b.gep(st_ptr, [b.sub(r1_, r0_)]))
         return n
 
     return sig, codegen

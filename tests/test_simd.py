@@ -577,33 +577,40 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
 
 def check_stream(rng, n, n_l):
     """candidate_pairs (each packing) on candidate_scene(rng, n, n_l) in float64 and
-    float32 records == the scalar loop, object by object."""
+    float32 records, for every row and for some rows after a used part of the heap, ==
+    the scalar loop, object by object."""
     for dtype in (np.float64, np.float32):
         cands, recs, lights, compete = candidate_scene(rng, n, n_l, dtype)
         seg, c_j = cands
         params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
-        room = int(seg[:, 1].sum())
-        for packing, kernel in STREAMS.items():
-            out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
-                   np.full(room + 1, SENTINEL_ROW, np.int32))
-            with _Packing(packing):
-                assert kernel(cands, recs, lights, compete, np.zeros(0, np.int64), params,
-                              out) == room
-            o_seg, o_p, o_j = out
-            for o in range(n):
-                want = (np.zeros(n_l), np.zeros(n_l, np.int32))
-                ob = np.int64(recs[1][o, 6])
-                end = pairs_scalar(recs[0], ob, o, lights, compete, c_j, seg[o, 0],
-                                   seg[o, 0] + (seg[o, 1] if ob else 0), want, 0, params)
-                a, m = o_seg[o]
-                assert m == end, (packing, dtype, o)
-                assert np.array_equal(o_p[a:a + m].view(np.int64), want[0][:m].view(np.int64))
-                assert np.array_equal(o_j[a:a + m], want[1][:m])
-                # Within the room of its chunk: the chunks run in parallel.
-                c0 = o // OBJECT_CHUNK * OBJECT_CHUNK
-                c1 = min(n, c0 + OBJECT_CHUNK)
-                assert seg[:c0, 1].sum() <= a and a + m <= seg[:c1, 1].sum()
-            assert o_j[room] == SENTINEL_ROW
+        some = np.flatnonzero(rng.uniform(size=n) < 0.4)
+        for rows, used in ((np.zeros(0, np.int64), 0), (some, 5)):
+            which = rows if rows.size else np.arange(n)
+            room = used + int(seg[which, 1].sum())
+            for packing, kernel in STREAMS.items():
+                out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
+                       np.full(room + 1, SENTINEL_ROW, np.int32))
+                with _Packing(packing):
+                    assert kernel(rows, cands, recs, lights, compete, np.zeros(0, np.int64),
+                                  params, out, used) == room
+                o_seg, o_p, o_j = out
+                assert (o_seg[np.setdiff1d(np.arange(n), which)] == -1).all()
+                assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
+                for r, o in enumerate(which):
+                    want = (np.zeros(n_l), np.zeros(n_l, np.int32))
+                    ob = np.int64(recs[1][o, 6])
+                    end = pairs_scalar(recs[0], ob, o, lights, compete, c_j, seg[o, 0],
+                                       seg[o, 0] + (seg[o, 1] if ob else 0), want, 0, params)
+                    a, m = o_seg[o]
+                    assert m == end, (packing, dtype, o)
+                    assert np.array_equal(o_p[a:a + m].view(np.int64),
+                                          want[0][:m].view(np.int64))
+                    assert np.array_equal(o_j[a:a + m], want[1][:m])
+                    # Within the room of its chunk of rows: the chunks run in parallel.
+                    c0 = r // OBJECT_CHUNK * OBJECT_CHUNK
+                    c1 = min(which.size, c0 + OBJECT_CHUNK)
+                    assert (used + seg[which[:c0], 1].sum() <= a
+                            and a + m <= used + seg[which[:c1], 1].sum())
 
 
 @examples(1.0)
