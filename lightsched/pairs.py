@@ -905,13 +905,13 @@ def start_at(rows, obj, n):
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, used):
-    """The pairs of the object ``rows`` (int64, ascending; empty: every row) from their
-    candidate lights (scheduler._Candidates: the point and spot lights whose sphere,
-    widened by a skin, reached the object when its list was made, and which still lies
-    inside that widened sphere): per candidate that competes, the exact Affects test and P
-    (_pair_p, as the light pass), then the competing directional lights ``dir_rows``. So a
-    frame whose lights moved within their skins walks no grid and groups nothing, and
-    finds the same pairs (bench/RESULTS.md, Next 10 and ebb5ec0: the pairs and lists
+    """The pairs of the object ``rows`` (int64, ascending) from their candidate lights
+    (scheduler._Candidates: the point and spot lights whose sphere, widened by a skin,
+    reached the object when its list was made, and which still lies inside that widened
+    sphere): per candidate that competes, the exact Affects test and P (_pair_p, as the
+    light pass), then the competing directional lights ``dir_rows``. So a frame whose
+    lights moved within their skins walks no grid and groups nothing, and finds the same
+    pairs (bench/RESULTS.md, Next 10 and ebb5ec0: the pairs and lists
     stages of a full (100k, 10k) frame 8.3 -> 6.6 ms, the lists' upkeep included); an
     incremental frame, those of the objects a changed light may reach.
 
@@ -931,15 +931,15 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     integer view): the grid's records in object row order; lights = (light_hot, light_f);
     params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]), the
     heap's records from ``used`` on free for at least the rows' candidates plus
-    len(dir_rows) per row. Writes the rows' segments, each object's pairs in candidate
-    order within the room of its chunk of rows, and returns the end of those rooms."""
+    len(dir_rows) per row. Writes the rows' segments (the others' are left as they are),
+    each object's pairs in candidate order within the room of its chunk of rows, and
+    returns the end of those rooms."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
     o_seg, o_p, o_j = out
     model = int(params[0])
-    every = rows.shape[0] == 0
-    n_rows = c_seg.shape[0] if every else rows.shape[0]
+    n_rows = rows.shape[0]
     n_dir = dir_rows.shape[0]
     # candidate_run and the stream read whole 8-word rows.
     vector = (model == MODEL_CONTRIBUTION and box.shape[1] == 8 and hot.shape[1] == 8
@@ -952,7 +952,7 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     for ch in range(n_chunks):
         room[ch] = at
         for r in range(ch * OBJECT_CHUNK, min(n_rows, (ch + 1) * OBJECT_CHUNK)):
-            at += c_seg[r if every else rows[r], 1] + n_dir
+            at += c_seg[rows[r], 1] + n_dir
     room[n_chunks] = at
     for ch in nb.prange(n_chunks):
         r0 = ch * OBJECT_CHUNK
@@ -962,11 +962,11 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
             continue
         m = room[ch]
         for r in range(r0, r1):
-            o = r if every else rows[r]
+            o = rows[r]
             o_seg[o, 0] = m
             ahead = r + PREFETCH_OBJECTS
             if far and ahead < n_rows:
-                oa = ahead if every else rows[ahead]
+                oa = rows[ahead]
                 if bits[oa, 6] != 0:
                     for t in range(c_seg[oa, 0], c_seg[oa, 0] + c_seg[oa, 1]):
                         prefetch_row(hot, c_j[t])
@@ -994,8 +994,8 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _stream_chunk(cands, recs, lights, compete, span, room, out):
-    """candidate_pairs' vector path for the object rows of span = (rows, r0, r1) (rows[r0:
-    r1], or r0..r1-1 when rows is empty; no directional light in the slots): their
+    """candidate_pairs' vector path for the object rows of span = (rows, r0, r1), i.e.
+    rows[r0:r1] (no directional light in the slots): their
     candidates laid end to end (simd.stream_fill), the exact test and P eight entries a
     step (stream_run), the spots in range eight a step (stream_spots), the pairs packed
     from room[0] on (stream_pack; room[1]: the end of the chunk's room), each object's
@@ -1020,9 +1020,8 @@ def _stream_chunk(cands, recs, lights, compete, span, room, out):
         stream_spots(box, lights, stream, spots, n_spots, results)
     before = np.empty(n_s + LANES + 1, np.int64)
     stream_pack(stream, results, n_s, (o_p, o_j), base, before)
-    every = rows.shape[0] == 0
     for r in range(r0, r1):
-        o = r if every else rows[r]
+        o = rows[r]
         a = before[starts[r - r0]]
         o_seg[o, 0] = base + a
         o_seg[o, 1] = before[starts[r - r0 + 1]] - a
@@ -1357,6 +1356,17 @@ def list_room(start):
 def _room_for(m):
     """The room of a candidate list of m lights: space for half as many again, and two."""
     return m + 2 + m // 2
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def list_objects(by_light, lights, mark):
+    """Marks (True in ``mark``) the objects in the candidate lists of the light rows
+    ``lights`` (by_light = (seg [L, 2], object rows), as light_lists keeps them)."""
+    l_seg, l_obj = by_light
+    for t in range(lights.shape[0]):
+        j = lights[t]
+        for i in range(l_seg[j, 0], l_seg[j, 0] + l_seg[j, 1]):
+            mark[l_obj[i]] = True
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -66,6 +66,7 @@ from .pairs import (
     light_lists,
     light_order,
     light_pass,
+    list_objects,
     list_room,
     move_records,
     object_pass,
@@ -135,8 +136,8 @@ CANDIDATE_LISTS = True
 # before it 10k was +-0.08, so the threshold was 2^15).
 CANDIDATE_MIN_OBJECTS = 1 << 12
 
-# pairs.candidate_pairs' rows for "every row".
-_EVERY_ROW = np.zeros(0, np.int64)
+# No directional light in the slots (pairs.candidate_pairs' dir_rows).
+_NO_ROWS = np.zeros(0, np.int64)
 
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
@@ -263,6 +264,14 @@ class Scheduler(SceneAPI):
             buf = aligned_empty(max(size, int(1.5 * (0 if buf is None else buf.size))), dtype)
             self._buffers[name] = buf
         return buf
+
+    def _rows(self, n: int) -> np.ndarray:
+        """0..n-1 (int64, read-only), kept while n is (at 1M a new one takes 0.24 ms)."""
+        rows = self._buffers.get("rows")
+        if rows is None or rows.size != n:
+            rows = _read_only(np.arange(n, dtype=np.int64))
+            self._buffers["rows"] = rows
+        return rows
 
     def _new_heap(self, room: int) -> tuple[np.ndarray, np.ndarray]:
         """A pair heap (P float64, light row int32) of at least ``room`` records, for a frame
@@ -485,16 +494,41 @@ class Scheduler(SceneAPI):
             else:
                 # The grid's records have theirs already (_every_grid).
                 cands.recs[1][rows, 6] = grid.vis[1][grid.pos_of[rows], 6]
+        def cands_plan(built: bool, walk: np.ndarray) -> str:
+            return (f"; candidate lists (each point and spot light's sphere widened by "
+                    f"{SKIN:g} of its radius) " + ("made: " if built else "kept, ")
+                    + f"{walk.size} of {int(np.count_nonzero(compete & ~is_dir))} lights "
+                    "walked again (they left their widened sphere or had none)")
+
+        # An incremental frame whose lights changed, under still cameras and objects (so no
+        # object enters or leaves the view), takes the pairs of the objects those lights
+        # may reach from their candidate lists (made now if there are none): no walk, no
+        # scan of the pair cache, no grouping (bench/RESULTS.md, lights10). The candidates'
+        # stream only: the contribution model, float64 records, no directional light in
+        # the slots.
+        changed_l = None if full else np.union1d(lrows, np.flatnonzero(compete != c.compete))
+        by_lists = (not full and cands_valid and same_cams and changed_l.size > 0
+                    and cfg.model == "contribution" and not fast
+                    and not cfg.directional_in_slots)
         if full and cands_valid:
             cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid,
                                                   not same_cams)
             fresh = None
-            plan["pairs"] += (
-                f"; candidate lists (each point and spot light's sphere widened by "
-                f"{SKIN:g} of its radius) " + ("made: " if built else "kept, ")
-                + f"{walk} of {int(np.count_nonzero(compete & ~is_dir))} lights walked "
-                "again (they left their widened sphere or had none)")
+            plan["pairs"] += cands_plan(built, walk)
             walked = np.zeros(0, np.int64)
+        elif by_lists:
+            # The objects in the lists of the changed lights before and after they change,
+            # and (lists stage) those of lights whose shadow map or "skip" status changed.
+            reach = np.zeros(n, np.bool_)
+            if cands is not None:
+                list_objects(cands.by_light, changed_l, reach)
+            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid, False)
+            list_objects(cands.by_light, walk, reach)
+            fresh = None
+            walked = changed_l
+            plan["pairs"] += cands_plan(built, walk) + (
+                f"; the objects in the lists of the {changed_l.size} changed lights take "
+                "their pairs from their candidate lists")
         elif full:
             rows = light_order(packed[0], np.flatnonzero(compete).astype(np.int32),
                                grid.grid[0], grid.grid[1])
@@ -502,10 +536,10 @@ class Scheduler(SceneAPI):
             plan["pairs"] += f", walked by {rows.size} lights"
             walked = np.zeros(0, np.int64)
         light_cells = None
-        if not full:
+        if not full and not by_lists:
             # Lights that changed or entered or left the competition have their pairs
             # replaced: they walk the grid again (the visible ones).
-            walked = np.union1d(lrows, np.flatnonzero(compete != c.compete))
+            walked = changed_l
             walk = walked[compete[walked]].astype(np.int32)
             walk = light_order(packed[0], walk, grid.grid[0], grid.grid[1])
             fresh = self._walk(packed, walk, grid, p_params, "pair")
@@ -590,8 +624,8 @@ class Scheduler(SceneAPI):
             room = int(c_seg[:, 1].sum()) + n * dir_rows.size
             seg = np.empty((n, 2), np.int64)
             heap = self._new_heap(room)
-            used = int(candidate_pairs(_EVERY_ROW, (c_seg, c_j), cands.recs, packed, compete,
-                                       dir_rows, p_params, (seg, *heap), 0))
+            used = int(candidate_pairs(self._rows(n), (c_seg, c_j), cands.recs, packed,
+                                       compete, dir_rows, p_params, (seg, *heap), 0))
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "every pair from the objects' candidate lists, by object row"
         elif full:
@@ -602,6 +636,24 @@ class Scheduler(SceneAPI):
             used = int(start[-1])
             run = np.arange(n, dtype=np.int64)
             plan["lists"] = "grouped by object (every pair new)"
+        elif by_lists:
+            reselect = np.flatnonzero((live != c.live) | (shadow_of_row != c.shadow_of_row))
+            list_objects(cands.by_light, reselect, reach)
+            # The visibility is last frame's: an object out of view has no pairs.
+            reach &= vis_o
+            rows = np.flatnonzero(reach)
+            c_seg, _, c_j, _ = cands.lists
+            seg, heap, used = _room(self._new_heap, c.seg, c.heap, c.used,
+                                    int(c_seg[rows, 1].sum()))
+            if rows.size:
+                used = int(candidate_pairs(rows, (c_seg, c_j), cands.recs, packed, compete,
+                                           _NO_ROWS, p_params, (seg, *heap), used))
+            run = np.flatnonzero(reach | c.fading | ((vis_o | c.vis_o) if cut else False))
+            plan["lists"] = (f"cache kept; the lists of {rows.size} objects made again from "
+                             f"their candidates; {run.size} of {int(vis_o.sum())} visible "
+                             "objects recomputed (in reach of changed lights or of lights "
+                             "whose shadow map changed, fading slots"
+                             + (", a cut" if cut else "") + ")")
         else:
             seg, heap, used, run = self._patch(c, walked, live, shadow_of_row, fresh, fresh_obj,
                                                fresh_rows, left_rows, cut, vis_o)
@@ -915,7 +967,8 @@ class Scheduler(SceneAPI):
         ``hidden`` (the camera moves) they hold the objects out of view too, by their own
         mask, so that they serve the objects a moving camera brings into view; else only the
         objects in view, which keeps the walks and lists of a still camera ~25% smaller at
-        (1M, 100k). Returns (lists, lights walked, made from scratch)."""
+        (1M, 100k). Returns (lists, the rows of the lights whose lists changed: those walked
+        and those dropped, made from scratch)."""
         hot = packed[0]
         n_l = hot.shape[0]
         own = compete & ~is_dir
@@ -999,7 +1052,7 @@ class Scheduler(SceneAPI):
         out.anchor[walk, :3] = hot[walk, :3]
         out.anchor[walk, 3] = wide[walk, 3]
         out.anchor[gone, 3] = 0.0
-        return out, walk.size, old is None
+        return out, walked[0], old is None
 
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...],

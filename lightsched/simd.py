@@ -617,8 +617,8 @@ _V8I8 = ir.VectorType(_I8, LANES)
 
 @intrinsic(prefer_literal=False)
 def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
-    """The candidates of the object rows rows[r0:r1] (rows int64, ascending; empty: the
-    rows r0..r1-1 themselves) laid end to end as one stream, the input of stream_run:
+    """The candidates of the object rows rows[r0:r1] (rows int64, ascending) laid end to
+    end as one stream, the input of stream_run:
     cands = (seg [N, 2] (start, length), light row int32 [C]), the lists of
     scheduler._Candidates (rooms with space to grow, so not contiguous); recs = (box, its
     integer view) the records in row order, whose mask 0 (out of view) leaves an object
@@ -643,9 +643,7 @@ def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
         b = builder
         seg_ptr, cj_ptr = _tuple_data(context, b, signature.args[0], args[0], (_I64, _I32))
         bits_ptr = _data(context, b, signature.args[1][1], b.extract_value(args[1], 1), _I64)
-        rows_ary = context.make_array(signature.args[2])(context, b, args[2])
-        rows_ptr = b.bitcast(rows_ary.data, ir.PointerType(_I64))
-        every = b.icmp_signed("==", b.extract_value(rows_ary.shape, 0), ir.Constant(_I64, 0))
+        rows_ptr = _data(context, b, signature.args[2], args[2], _I64)
         sj_ptr, so_ptr = _tuple_data(context, b, signature.args[5], args[5], (_I32, _I32))
         st_ptr = _data(context, b, signature.args[6], args[6], _I64)
         r0_, r1_ = args[3], args[4]
@@ -653,7 +651,6 @@ def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
         zero = ir.Constant(_I64, 0)
         step = ir.Constant(_I64, LANES)
         n_slot = cgutils.alloca_once_value(b, zero)
-        o_slot = cgutils.alloca_once(b, _I64)
 
         def copy(at, src, k, ln, o32):
             lanes = b.icmp_signed("<", iota, _splat(b, b.sub(ln, k), _VI64))
@@ -665,10 +662,7 @@ def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
         with cgutils.for_range_slice(b, r0_, r1_, ir.Constant(_I64, 1)) as (r, _):
             at = b.load(n_slot)
             b.store(at, b.gep(st_ptr, [b.sub(r, r0_)]))
-            b.store(r, o_slot)
-            with b.if_then(b.not_(every), likely=False):
-                b.store(b.load(b.gep(rows_ptr, [r])), o_slot)
-            o = b.load(o_slot)
+            o = b.load(b.gep(rows_ptr, [r]))
             two = b.mul(o, ir.Constant(_I64, 2))
             src = b.load(b.gep(seg_ptr, [two]))
             ln = b.load(b.gep(seg_ptr, [b.add(two, ir.Constant(_I64, 1))]))

@@ -362,7 +362,8 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     leave. Bit for bit the frames of a scheduler that walks
     every light every frame, through each of those, through changes that are not moves
     (radius, type, cone, mask, intensity), lights leaving and entering the view, an
-    incremental frame between, camera moves (lists of the objects in view made again with
+    incremental frame between (its changed lights' objects paired from the lists), camera
+    moves (lists of the objects in view made again with
     those out of view when objects come into view; then kept, the records' masks following
     the view), and a frame that drops the lists (objects moved)."""
     p = _Pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1))
@@ -437,11 +438,95 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
         seen = fa.visible
     if grid_kind == "every":
         assert plans == ["", "made", "kept", "kept", "kept", "kept", "kept", "made", "kept",
-                         "kept", "", "kept", "made", "kept", "kept", "kept", "", "made",
+                         "kept", "kept", "kept", "made", "kept", "kept", "kept", "", "made",
                          "made", "kept"], plans
         assert entered["camera"] > 0 and entered["wide"] > 100, entered
     else:
         assert set(plans) == {""}, plans
+
+
+@pytest.mark.parametrize("unshadowed", ["light", "skip"])
+def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_kind,
+                                                                          unshadowed):
+    """Incremental frames whose lights change under a still camera take the pairs of the
+    objects in the changed lights' candidate lists (before and after the lists change, and
+    of lights whose shadow map or "skip" status changed) from those lists, and recompute
+    only those objects and the fading ones: bit for bit the frames of a scheduler that
+    walks every light every frame, through small moves, lights leaving their widened
+    sphere, changes of radius, type, cone, mask, intensity and shadow flag, lights leaving
+    and entering the view, a light with no candidate list, a light turning directional and
+    back, and a cut."""
+    cfg = ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1, shadow_budget=3,
+                    unshadowed=unshadowed)
+    p = _Pair(cfg)
+    scene = city(6_000, 600, seed=7, shadow_fraction=0.1, sun_shadows=True)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
+    lights["inner_angle"] = 0.8 * lights["outer_angle"]
+    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
+    p.set_lights(**lights)
+    p.set_objects(**objects)
+    cams = list(scene.cameras)
+    rng = np.random.default_rng(7)
+    local = np.flatnonzero(lights["type"] != 2)
+    some = rng.choice(local, 60, replace=False)
+    steps = ["drift", "drift", "tenth", "tenth", "jump", "tenth", "radius", "props",
+             "shadows", "tenth", "out", "lonely", "tenth", "back", "turn", "unturn", "cut",
+             "tenth", "tenth"]
+    by_lists = []
+    for i, step in enumerate(steps):
+        rows = local
+        if step == "drift":
+            lights["position"][local] += rng.normal(0, 0.03, (local.size, 3))
+        elif step in ("tenth", "cut"):
+            rows = local[i % 10::10]
+            lights["position"][rows] += rng.normal(0, 0.05, (rows.size, 3))
+        elif step == "jump":
+            rows = some[:15]
+            lights["position"][rows] += rng.normal(0, 8.0, (rows.size, 3))
+        elif step == "radius":
+            rows = some[:20]
+            lights["radius"][rows] *= rng.uniform(0.7, 1.3, rows.size)
+        elif step == "props":
+            rows = some[20:40]
+            lights["type"][rows[:10]] = 1 - lights["type"][rows[:10]]
+            lights["outer_angle"][rows] = rng.uniform(0.2, 1.2, rows.size)
+            lights["inner_angle"][rows] = lights["outer_angle"][rows] * 0.5
+            lights["mask"][rows[10:]] = rng.choice(np.array([0, 1, 6], np.uint32), 10)
+            lights["intensity"][rows] = rng.uniform(0.5, 80.0, rows.size)
+        elif step == "shadows":
+            rows = some[40:]
+            lights["shadows"][rows] = ~lights["shadows"][rows]
+            lights["intensity"][rows] *= 3.0
+        elif step == "out":
+            rows = some[:5]
+            lights["position"][rows] += 1e5
+        elif step == "lonely":
+            # The light furthest behind the camera, out of view since the lists were made,
+            # moves further back: it has no candidate list.
+            cam = cams[0]
+            ahead = (lights["position"][local] - cam.position) @ np.asarray(cam.forward)
+            rows = local[[np.argmin(ahead)]]
+            lights["position"][rows] -= np.asarray(cam.forward, float)
+        elif step == "back":
+            rows = some[:5]
+            lights["position"][rows] -= 1e5
+        elif step in ("turn", "unturn"):
+            rows = some[5:8]
+            lights["type"][rows] = 2 if step == "turn" else 0
+        p.update_lights(**{k: v[rows] for k, v in lights.items()})
+        cut = step == "cut"
+        fa, fb = p.a.frame(cams, dt=1 / 60, cut=cut), p.b.frame(cams, dt=1 / 60, cut=cut)
+        frames_identical(fa, fb, f"frame {i} ({step}, {fa.stats['plan']})")
+        by_lists.append("from their candidate lists" in fa.stats["plan"]["pairs"])
+        if by_lists[-1]:
+            assert _plan(fa).startswith("incremental"), fa.stats["plan"]
+            assert (fa.stats["counts"]["recomputed_objects"]
+                    < fa.stats["counts"]["visible_objects"] or cut)
+    if grid_kind == "every":
+        assert by_lists == [False, False] + [True] * (len(steps) - 2), by_lists
+    else:
+        assert not any(by_lists), by_lists
 
 
 @pytest.mark.parametrize("in_slots", [True, False])

@@ -584,15 +584,14 @@ def check_stream(rng, n, n_l):
         seg, c_j = cands
         params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
         some = np.flatnonzero(rng.uniform(size=n) < 0.4)
-        for rows, used in ((np.zeros(0, np.int64), 0), (some, 5)):
-            which = rows if rows.size else np.arange(n)
+        for which, used in ((np.arange(n), 0), (some, 5), (some[:0], 3)):
             room = used + int(seg[which, 1].sum())
             for packing, kernel in STREAMS.items():
                 out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
                        np.full(room + 1, SENTINEL_ROW, np.int32))
                 with _Packing(packing):
-                    assert kernel(rows, cands, recs, lights, compete, np.zeros(0, np.int64),
-                                  params, out, used) == room
+                    assert kernel(which, cands, recs, lights, compete,
+                                  np.zeros(0, np.int64), params, out, used) == room
                 o_seg, o_p, o_j = out
                 assert (o_seg[np.setdiff1d(np.arange(n), which)] == -1).all()
                 assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
