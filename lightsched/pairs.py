@@ -35,7 +35,10 @@ the camera still or moving) takes steps 2 and 3 from candidate lists instead
 were made with, ``spread_lists`` lays out per object the lights whose widened sphere
 reached it, ``edit_candidates`` and ``light_lists`` (``compact_light_lists``) follow the
 lights that walk the grid again, and ``candidate_pairs`` makes the exact test and P of
-each object's candidates, in row order.
+each object's candidates, in row order: chunks of objects whose candidates are laid end to
+end and taken eight a step whatever object each belongs to (simd.stream_run). An
+incremental frame whose lights change runs it on the objects in those lights' lists
+(``list_objects``).
 A scene small enough for brute force is the same pipeline with a single cell.
 """
 

@@ -12,7 +12,11 @@ objects (top-K and fade per object), output.
 A full frame computes every pair; an incremental one keeps the last frame's pair cache
 (per object its (P, light row) pairs, pairs.py) and recomputes only what changed:
 - lights whose fields changed, or that entered or left the view, walk the grid of objects
-  again; the objects that held a pair of theirs or get one now rewrite their lists;
+  again; the objects that held a pair of theirs or get one now rewrite their lists. Under
+  still cameras and objects (and the contribution model, exact precision, no directional
+  light in the slots) the objects in the candidate lists of those lights instead take all
+  their pairs again from their lists (pairs.candidate_pairs on those rows): no walk, no
+  scan of the cache, no grouping;
 - objects that moved or came into view get new lists against every light (each tested
   against every light when they are few, else against the lights of the cells its box
   overlaps in a grid of the lights, kept while no light changes); in a grid of every
@@ -21,6 +25,9 @@ A full frame computes every pair; an incremental one keeps the last frame's pair
 - the object pass runs on those objects, on the objects holding a pair of a light whose
   shadow map or "skip" status changed, and on the objects still fading; the other rows of
   the outputs are the last frame's (shared outright when no row changed).
+A full frame's object pass leaves out the objects out of view in it and the two frames
+before: the output arrays it takes back (the frame before the last's) hold their empty
+rows already.
 Results equal a full frame's: an object whose pairs, slots and shadow maps did not change
 gets the same row again (selection with hysteresis is a fixed point of unchanged P). The
 shadow ranking is redone every frame but an unchanged one: its order is a fixed point only

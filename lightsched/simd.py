@@ -12,9 +12,14 @@ scalar code; "fast" float32 records keep the scalar loop throughout. candidate_r
 the lanes around for the candidate lists (pairs.candidate_pairs): one object against eight
 of its candidate lights a step, each light's 64-byte row of light_hot loaded whole and
 transposed as the objects' records are here, the same rule and operations lane by lane.
-held_row takes the object pass's common case (pairs.object_pass: slots that hold the
-object's selection, still in last frame's order) with its pairs in the lanes, and writes
-each of the object's output rows with one store.
+The stream kernels do the same for a whole chunk of objects with the lanes filled across
+objects: stream_fill lays their candidates end to end as (light row, object row) entries,
+stream_run tests eight entries a step (each lane's object record loaded and transposed as
+its light's row is) and lists the spot lights in range, stream_spots takes those eight a
+step through the cone, stream_pack packs the pairs by object. held_row takes the object
+pass's common case (pairs.object_pass: slots that hold the object's selection, still in
+last frame's order) with its pairs in the lanes, and writes each of the object's output
+rows with one store.
 
 Why LLVM IR: the scalar loop spends most of its time on the range test and the compaction
 of the survivors, one candidate at a time; LLVM's loop vectoriser does not vectorise a
