@@ -1179,13 +1179,10 @@ def light_grid(hot, rows):
 def _grid_candidates(r, box, lgrid, seen, out, m):
     """The candidate light rows of record r of ``box`` in a grid of lights (light_grid):
     the big lights, then those of the cells its box overlaps, each once (``seen``: the last
-    record that took each light row), written from m into ``out`` unless it is empty (a
-    count only); returns the new end."""
+    record that took each light row), written from m into ``out``; returns the new end."""
     g_f, dims, cell_start, cell_rows, big = lgrid
-    write = out.shape[0] > 0
     for j in big:
-        if write:
-            out[m] = j
+        out[m] = j
         m += 1
     x0 = _cell(box[r, 0], g_f[0], g_f[3], dims[0])
     y0 = _cell(box[r, 1], g_f[1], g_f[4], dims[1])
@@ -1200,9 +1197,28 @@ def _grid_candidates(r, box, lgrid, seen, out, m):
                 j = cell_rows[t]
                 if seen[j] != r:
                     seen[j] = r
-                    if write:
-                        out[m] = j
+                    out[m] = j
                     m += 1
+    return m
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _grid_bound(r, box, lgrid):
+    """At least the number of _grid_candidates of record r: the big lights and every entry
+    of the cells its box overlaps (a light in several of them counted each time), from the
+    cells' starts alone."""
+    g_f, dims, cell_start, _, big = lgrid
+    x0 = _cell(box[r, 0], g_f[0], g_f[3], dims[0])
+    y0 = _cell(box[r, 1], g_f[1], g_f[4], dims[1])
+    z0 = _cell(box[r, 2], g_f[2], g_f[5], dims[2])
+    x1 = _cell(box[r, 3], g_f[0], g_f[3], dims[0])
+    y1 = _cell(box[r, 4], g_f[1], g_f[4], dims[1])
+    z1 = _cell(box[r, 5], g_f[2], g_f[5], dims[2])
+    m = big.shape[0]
+    for x in range(x0, x1 + 1):
+        for y in range(y0, y1 + 1):
+            base = (x * dims[1] + y) * dims[2]
+            m += cell_start[base + z1 + 1] - cell_start[base + z0]
     return m
 
 
@@ -1211,20 +1227,17 @@ def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
     """direct_pairs with each object's candidates from a grid of the point and spot lights
     (light_grid): the lights of the cells its box overlaps, and the big ones. The same
     pairs, in another order within an object. The candidates are listed in parallel over
-    blocks of FRESH_CHUNK objects (one pass counts them, the second lists them), tested by
-    candidate_pairs (its stream: a moved object has ~40 candidates here, and one object at
-    a time took ~330 ns an object at (100k, 10k) with 10% of the objects moving), and the
-    pairs packed in object order."""
+    blocks of FRESH_CHUNK objects, each into a room sized from the cells' starts
+    (_grid_bound), tested by candidate_pairs (its stream: a moved object has ~40
+    candidates here, and one object at a time took ~330 ns an object at (100k, 10k) with
+    10% of the objects moving), and the pairs packed in object order."""
     n_l = lights[0].shape[0]
     f = rows.shape[0]
     n_chunks = (f + FRESH_CHUNK - 1) // FRESH_CHUNK
     c_seg = np.zeros((f, 2), np.int64)
-    nothing = np.empty(0, np.int32)
     box = recs[0]
-    for ch in nb.prange(n_chunks):
-        seen = np.full(n_l, -1, np.int32)
-        for r in range(ch * FRESH_CHUNK, min(f, (ch + 1) * FRESH_CHUNK)):
-            c_seg[r, 1] = _grid_candidates(r, box, lgrid, seen, nothing, 0)
+    for r in nb.prange(f):
+        c_seg[r, 1] = _grid_bound(r, box, lgrid)
     total = 0
     for r in range(f):
         c_seg[r, 0] = total
@@ -1233,7 +1246,7 @@ def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
     for ch in nb.prange(n_chunks):
         seen = np.full(n_l, -1, np.int32)
         for r in range(ch * FRESH_CHUNK, min(f, (ch + 1) * FRESH_CHUNK)):
-            _grid_candidates(r, box, lgrid, seen, c_j, c_seg[r, 0])
+            c_seg[r, 1] = _grid_candidates(r, box, lgrid, seen, c_j, c_seg[r, 0]) - c_seg[r, 0]
     room = total + f * dir_rows.shape[0]
     seg = np.empty((f, 2), np.int64)
     o_p = np.empty(room)
