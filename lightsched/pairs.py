@@ -1176,6 +1176,15 @@ def light_grid(hot, rows):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _box_cells(box, r, g_f, dims):
+    """The cells (x0, y0, z0, x1, y1, z1) of a grid of lights (light_grid) that record r's
+    box overlaps."""
+    return (_cell(box[r, 0], g_f[0], g_f[3], dims[0]), _cell(box[r, 1], g_f[1], g_f[4], dims[1]),
+            _cell(box[r, 2], g_f[2], g_f[5], dims[2]), _cell(box[r, 3], g_f[0], g_f[3], dims[0]),
+            _cell(box[r, 4], g_f[1], g_f[4], dims[1]), _cell(box[r, 5], g_f[2], g_f[5], dims[2]))
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _grid_candidates(r, box, lgrid, seen, out, m):
     """The candidate light rows of record r of ``box`` in a grid of lights (light_grid):
     the big lights, then those of the cells its box overlaps, each once (``seen``: the last
@@ -1184,12 +1193,7 @@ def _grid_candidates(r, box, lgrid, seen, out, m):
     for j in big:
         out[m] = j
         m += 1
-    x0 = _cell(box[r, 0], g_f[0], g_f[3], dims[0])
-    y0 = _cell(box[r, 1], g_f[1], g_f[4], dims[1])
-    z0 = _cell(box[r, 2], g_f[2], g_f[5], dims[2])
-    x1 = _cell(box[r, 3], g_f[0], g_f[3], dims[0])
-    y1 = _cell(box[r, 4], g_f[1], g_f[4], dims[1])
-    z1 = _cell(box[r, 5], g_f[2], g_f[5], dims[2])
+    x0, y0, z0, x1, y1, z1 = _box_cells(box, r, g_f, dims)
     for x in range(x0, x1 + 1):
         for y in range(y0, y1 + 1):
             base = (x * dims[1] + y) * dims[2]
@@ -1208,12 +1212,7 @@ def _grid_bound(r, box, lgrid):
     of the cells its box overlaps (a light in several of them counted each time), from the
     cells' starts alone."""
     g_f, dims, cell_start, _, big = lgrid
-    x0 = _cell(box[r, 0], g_f[0], g_f[3], dims[0])
-    y0 = _cell(box[r, 1], g_f[1], g_f[4], dims[1])
-    z0 = _cell(box[r, 2], g_f[2], g_f[5], dims[2])
-    x1 = _cell(box[r, 3], g_f[0], g_f[3], dims[0])
-    y1 = _cell(box[r, 4], g_f[1], g_f[4], dims[1])
-    z1 = _cell(box[r, 5], g_f[2], g_f[5], dims[2])
+    x0, y0, z0, x1, y1, z1 = _box_cells(box, r, g_f, dims)
     m = big.shape[0]
     for x in range(x0, x1 + 1):
         for y in range(y0, y1 + 1):

@@ -354,6 +354,22 @@ def _cand_plan(f: ls.Frame) -> str:
     return m.group(1) if m else ""
 
 
+def _city_pair(cfg: ls.Config, seed: int, shadowed: float, inner: float
+               ) -> tuple[_Pair, dict, dict, list[ls.Camera]]:
+    """A _Pair on city(6000, 600) with every light mask bit and spot inner angles of
+    ``inner`` times the outer ones: the pair, the lights' and objects' fields (copies, to
+    change), the cameras."""
+    p = _Pair(cfg)
+    scene = city(6_000, 600, seed=seed, shadow_fraction=shadowed, sun_shadows=True)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
+    lights["inner_angle"] = inner * lights["outer_angle"]
+    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
+    p.set_lights(**lights)
+    p.set_objects(**objects)
+    return p, lights, objects, list(scene.cameras)
+
+
 def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     """Full frames whose lights drift (objects and camera still) take their pairs from the
     objects' candidate lists (scheduler._candidates): kept while each light stays inside
@@ -366,15 +382,8 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     moves (lists of the objects in view made again with
     those out of view when objects come into view; then kept, the records' masks following
     the view), and a frame that drops the lists (objects moved)."""
-    p = _Pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1))
-    scene = city(6_000, 600, seed=4, shadow_fraction=0.05, sun_shadows=True)
-    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
-    lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
-    lights["inner_angle"] = np.zeros(lights["id"].size)
-    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
-    p.set_lights(**lights)
-    p.set_objects(**objects)
-    cams = list(scene.cameras)
+    p, lights, objects, cams = _city_pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1),
+                                          4, 0.05, 0.0)
     rng = np.random.default_rng(4)
     local = np.flatnonzero(lights["type"] != 2)
     some = rng.choice(local, 40, replace=False)
@@ -458,15 +467,7 @@ def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_
     back, and a cut."""
     cfg = ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1, shadow_budget=3,
                     unshadowed=unshadowed)
-    p = _Pair(cfg)
-    scene = city(6_000, 600, seed=7, shadow_fraction=0.1, sun_shadows=True)
-    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
-    lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
-    lights["inner_angle"] = 0.8 * lights["outer_angle"]
-    objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
-    p.set_lights(**lights)
-    p.set_objects(**objects)
-    cams = list(scene.cameras)
+    p, lights, objects, cams = _city_pair(cfg, 7, 0.1, 0.8)
     rng = np.random.default_rng(7)
     local = np.flatnonzero(lights["type"] != 2)
     some = rng.choice(local, 60, replace=False)
