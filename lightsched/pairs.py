@@ -933,10 +933,11 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
     integer view): the grid's records in object row order; lights = (light_hot, light_f);
     params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]), the
-    heap's records from ``used`` on free for at least the rows' candidates plus
-    len(dir_rows) per row. Writes the rows' segments (the others' are left as they are),
-    each object's pairs in candidate order within the room of its chunk of rows, and
-    returns the end of those rooms."""
+    heap's records from ``used`` on free for the rows' candidates plus len(dir_rows) per
+    row. Writes the rows' segments (the others' are left as they are), each object's pairs
+    in candidate order within the room of its chunk of rows, and returns (the end of those
+    rooms, the number of pairs written); (that end, -1) with nothing written when the
+    heap is shorter than it, so that a caller may size the heap from an estimate."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
@@ -950,19 +951,30 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     stream = vector and n_dir == 0
     far = hot.nbytes > PREFETCH_BYTES
     n_chunks = (n_rows + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    # The chunks' rooms summed in parallel: at (1M, 100k) a serial pass over the rows'
+    # lengths (16 MB of segments, read with a stride) took ~0.5 ms.
     room = np.empty(n_chunks + 1, np.int64)
-    at = used
-    for ch in range(n_chunks):
-        room[ch] = at
+    room[0] = used
+    for ch in nb.prange(n_chunks):
+        size = 0
         for r in range(ch * OBJECT_CHUNK, min(n_rows, (ch + 1) * OBJECT_CHUNK)):
-            at += c_seg[rows[r], 1] + n_dir
-    room[n_chunks] = at
+            size += c_seg[rows[r], 1] + n_dir
+        room[ch + 1] = size
+    for ch in range(n_chunks):
+        room[ch + 1] += room[ch]
+    at = room[n_chunks]
+    if at > o_p.shape[0]:
+        return at, -1
+    wrote = np.empty(n_chunks, np.int64)
     for ch in nb.prange(n_chunks):
         r0 = ch * OBJECT_CHUNK
         r1 = min(n_rows, r0 + OBJECT_CHUNK)
-        if stream and _stream_chunk(cands, recs, lights, compete, (rows, r0, r1),
-                                    room[ch:ch + 2], out):
-            continue
+        if stream:
+            k = _stream_chunk(cands, recs, lights, compete, (rows, r0, r1), room[ch:ch + 2],
+                              out)
+            if k >= 0:
+                wrote[ch] = k
+                continue
         m = room[ch]
         for r in range(r0, r1):
             o = rows[r]
@@ -992,7 +1004,8 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
                     o_j[m] = j
                     m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
-    return at
+        wrote[ch] = m - room[ch]
+    return at, wrote.sum()
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -1003,8 +1016,8 @@ def _stream_chunk(cands, recs, lights, compete, span, room, out):
     step (stream_run), the spots in range eight a step (stream_spots), the pairs packed
     from room[0] on (stream_pack; room[1]: the end of the chunk's room), each object's
     segment from the pairs before its first entry. The same pairs, in the same order and
-    bits, as candidate_run object by object. Returns False, having written nothing, for
-    float32 records. out as candidate_pairs'."""
+    bits, as candidate_run object by object. Returns the number of pairs written, or -1,
+    having written nothing, for float32 records. out as candidate_pairs'."""
     rows, r0, r1 = span
     o_seg, o_p, o_j = out
     base = room[0]
@@ -1015,7 +1028,7 @@ def _stream_chunk(cands, recs, lights, compete, span, room, out):
     starts = np.empty(r1 - r0 + 1, np.int64)
     n_s = stream_fill(cands, recs, rows, r0, r1, stream, starts)
     if n_s < 0:
-        return False
+        return -1
     box = recs[0]
     results = (np.empty(n_s + LANES), np.empty(n_s + LANES, np.uint8))
     n_spots = stream_run(box, lights[0], compete, stream, n_s, results, spots)
@@ -1028,7 +1041,7 @@ def _stream_chunk(cands, recs, lights, compete, span, room, out):
         a = before[starts[r - r0]]
         o_seg[o, 0] = base + a
         o_seg[o, 1] = before[starts[r - r0 + 1]] - a
-    return True
+    return before[n_s]
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -345,7 +345,18 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
         fb = p.b.frame(cams, dt=1 / 30, cut=cut)
         seen.add(_plan(fa).split(":")[0])
         frames_identical(fa, fb, f"frame {i} ({op}, {_plan(fa)})")
+        _check_counts(p.a, fa)
+        _check_counts(p.b, fb)
     assert seen == {"full", "incremental", "unchanged"}, seen
+
+
+def _check_counts(s: ls.Scheduler, f: ls.Frame) -> None:
+    """The frame's pair count is its cache's, and the objects' and the lights' candidate
+    lists hold as many candidates (a full frame sizes its pair heap from the lights')."""
+    c = s._cache
+    assert f.stats["counts"]["pairs"] == int(c.seg[:, 1].sum())
+    if c.cands is not None:
+        assert int(c.cands.lists[0][:, 1].sum()) == int(c.cands.by_light[0][:, 1].sum())
 
 
 def _cand_plan(f: ls.Frame) -> str:
@@ -441,6 +452,7 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
             p.update_lights(**lights)
         fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
         frames_identical(fa, fb, f"frame {i} ({step}, {fa.stats['plan']['pairs']})")
+        _check_counts(p.a, fa)
         plans.append(_cand_plan(fa))
         if step in ("camera", "turn", "wide"):
             entered[step] = int(np.count_nonzero(fa.visible & ~seen))
@@ -519,6 +531,7 @@ def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_
         cut = step == "cut"
         fa, fb = p.a.frame(cams, dt=1 / 60, cut=cut), p.b.frame(cams, dt=1 / 60, cut=cut)
         frames_identical(fa, fb, f"frame {i} ({step}, {fa.stats['plan']})")
+        _check_counts(p.a, fa)
         by_lists.append("from their candidate lists" in fa.stats["plan"]["pairs"])
         if by_lists[-1]:
             assert _plan(fa).startswith("incremental"), fa.stats["plan"]

@@ -578,7 +578,8 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
 def check_stream(rng, n, n_l):
     """candidate_pairs (each packing) on candidate_scene(rng, n, n_l) in float64 and
     float32 records, for every row and for some rows after a used part of the heap, ==
-    the scalar loop, object by object."""
+    the scalar loop, object by object; it returns the end of the room and the pairs it
+    wrote, and given a heap one record short of that room, writes nothing."""
     for dtype in (np.float64, np.float32):
         cands, recs, lights, compete = candidate_scene(rng, n, n_l, dtype)
         seg, c_j = cands
@@ -589,10 +590,17 @@ def check_stream(rng, n, n_l):
             for packing, kernel in STREAMS.items():
                 out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
                        np.full(room + 1, SENTINEL_ROW, np.int32))
+                args = (which, cands, recs, lights, compete, np.zeros(0, np.int64), params)
                 with _Packing(packing):
-                    assert kernel(which, cands, recs, lights, compete,
-                                  np.zeros(0, np.int64), params, out, used) == room
+                    if room > used:
+                        # A heap one record short of the room: nothing written.
+                        short = (out[0], out[1][:room - 1], out[2][:room - 1])
+                        assert kernel(*args, short, used) == (room, -1)
+                        assert (out[0] == -1).all() and (out[2] == SENTINEL_ROW).all()
+                    end, wrote = kernel(*args, out, used)
+                assert end == room
                 o_seg, o_p, o_j = out
+                assert wrote == o_seg[which, 1].sum()
                 assert (o_seg[np.setdiff1d(np.arange(n), which)] == -1).all()
                 assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
                 for r, o in enumerate(which):
