@@ -11,7 +11,8 @@ reads one 64-byte record: ``light_hot[L, 8]``: 0-2 position, 3 radius, 4 mask, 5
 row * 32 + type * 8, 6 intensity i, 7 user priority p_user (all exact in float64);
 ``light_f[L, 8]``: 0-2 axis (normalised direction), 3 cos(outer), 4 sin(outer),
 5 cos(inner), 6 id, 7 thesis camera term A. Spot lights with inner == outer (or whose
-cosines round equal) get cos(inner) = NaN, which selects the step profile.
+cosines round equal) get cos(inner) = NaN, which selects the step profile; other lights
+have no cone: 1, 0, NaN there, never read.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from .frustum import SERIAL_LIGHTS, CameraFrames
-from .scene import DIRECTIONAL, LightStore
+from .scene import DIRECTIONAL, SPOT, LightStore
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
@@ -52,11 +53,18 @@ def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
     hot[j, 5] = j * 32 + typ[j] * 8
     hot[j, 6] = intensity[j]
     hot[j, 7] = prio[j]
-    lf[j, 3] = math.cos(outer[j])
-    lf[j, 4] = math.sin(outer[j])
-    cos_i = math.cos(inner[j])
-    # The step profile: inner == outer, or so close that the cosines are equal.
-    lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
+    if typ[j] == SPOT:
+        lf[j, 3] = math.cos(outer[j])
+        lf[j, 4] = math.sin(outer[j])
+        cos_i = math.cos(inner[j])
+        # The step profile: inner == outer, or so close that the cosines are equal.
+        lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
+    else:
+        # Only a spot light's cone is read (its type is packed with it): the three
+        # cosines and sines were ~60% of packing 100k lights (0.8 of 1.35 ms).
+        lf[j, 3] = 1.0
+        lf[j, 4] = 0.0
+        lf[j, 5] = np.nan
     lf[j, 6] = ids[j]
     if typ[j] != DIRECTIONAL:
         cam_pos, cam_basis, cam_tan, cam_focus = cams
