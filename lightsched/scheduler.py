@@ -509,14 +509,17 @@ class Scheduler(SceneAPI):
 
         # An incremental frame whose lights changed, under still cameras and objects (so no
         # object enters or leaves the view), takes the pairs of the objects those lights
-        # may reach from their candidate lists (made now if there are none): no walk, no
-        # scan of the pair cache, no grouping (bench/RESULTS.md, lights10). The candidates'
-        # stream only: the contribution model, float64 records, no directional light in
-        # the slots.
+        # may reach from their candidate lists: no walk, no scan of the pair cache, no
+        # grouping (bench/RESULTS.md, lights10). Only with last frame's lists, which name
+        # the objects a changed light reached before it changed (lists made now would not:
+        # a light that left the view is in none, and its objects would keep its pairs);
+        # without them the frame walks the changed lights and makes the lists for the
+        # next frames. The candidates' stream only: the contribution model, float64
+        # records, no directional light in the slots.
         changed_l = None if full else np.union1d(lrows, np.flatnonzero(compete != c.compete))
-        by_lists = (not full and cands_valid and same_cams and changed_l.size > 0
-                    and cfg.model == "contribution" and not fast
-                    and not cfg.directional_in_slots)
+        lists_path = (not full and cands_valid and same_cams and cfg.model == "contribution"
+                      and not fast and not cfg.directional_in_slots)
+        by_lists = lists_path and cands is not None and changed_l.size > 0
         if full and cands_valid:
             cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid,
                                                   not same_cams)
@@ -527,8 +530,7 @@ class Scheduler(SceneAPI):
             # The objects in the lists of the changed lights before and after they change,
             # and (lists stage) those of lights whose shadow map or "skip" status changed.
             reach = np.zeros(n, np.bool_)
-            if cands is not None:
-                list_objects(cands.by_light, changed_l, reach)
+            list_objects(cands.by_light, changed_l, reach)
             cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid, False)
             list_objects(cands.by_light, walk, reach)
             fresh = None
@@ -573,6 +575,9 @@ class Scheduler(SceneAPI):
                               f"kept); {fresh_rows.size} moved or newly visible objects get "
                               f"new pairs {how} {int(compete.sum())} lights; "
                               f"{left_rows.size} objects left the view")
+            if lists_path and cands is None:
+                cands, walk, _ = self._candidates(None, packed, compete, is_dir, grid, False)
+                plan["pairs"] += cands_plan(True, walk) + " for the next frames"
         t = _lap(seconds, "pairs", t)
 
         # Shadowed lights (DESIGN section 2): candidates affect a visible object.

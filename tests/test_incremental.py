@@ -610,6 +610,43 @@ def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
     assert plans == [False, True, True, False, True, camera_keeps, True], plans
 
 
+def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_kind):
+    """Two lights over two apart groups of objects. The first frame makes no candidate
+    lists (it walks the lights); in the next, one light leaves the view: its objects lose
+    it, though lists made in that frame would not name them (the light is in none). That
+    frame replaces the changed light's pairs (with none) and makes the lists for the next
+    frames, which take the other light's move from them; every frame is the oracle's and
+    a full frame's."""
+    rng = np.random.default_rng(3)
+    centre = np.concatenate([rng.uniform(-4, 4, (60, 3)) + [-20.0, 0, 40],
+                             rng.uniform(-4, 4, (60, 3)) + [20.0, 0, 40]])
+    objects = dict(id=np.arange(120), bounds_min=centre - 0.5, bounds_max=centre + 0.5)
+    lights = dict(id=np.array([4, 9]), type=np.zeros(2, np.uint8), radius=np.full(2, 9.0),
+                  position=np.array([[-20.0, 0, 40], [20.0, 0, 40]]))
+    cfg = ls.Config(max_lights=2, fade_in=0.0, fade_out=0.0)
+    t, p = Twin(cfg), _Pair(cfg)
+    cam = [ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0, 1]),
+                     up=np.array([0.0, 1, 0]), fov_y=1.2, aspect=1.0, near=0.5, far=200.0)]
+    plans = []
+    for i, position in enumerate([None, [1e6, 0, 0], [21.0, 0, 40]]):
+        for s in (t, p):
+            if position is None:
+                s.set_lights(**lights)
+                s.set_objects(**objects)
+            else:
+                s.update_lights(id=lights["id"][[i - 1]], position=np.array([position]))
+        ff, _ = t.frame(cam, dt=1 / 60)
+        fa, fb = p.a.frame(cam, dt=1 / 60), p.b.frame(cam, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i}")
+        frames_identical(fa, ff, f"frame {i}")
+        plans.append(fa.stats["plan"]["pairs"])
+    assert (fa.count[:60] == 0).all() and (fa.count[60:] == 1).all()
+    if grid_kind == "every":
+        assert "walked by 0 changed lights" in plans[1], plans[1]
+        assert "for the next frames" in plans[1], plans[1]
+        assert "take their pairs from their candidate lists" in plans[2], plans[2]
+
+
 def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
     """``cam`` turned about the vertical axis (a narrower view: objects leave and enter)."""
     f = np.asarray(cam.forward, float)
