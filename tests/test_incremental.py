@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from test_equivalence import big_scene, configs
 
 import lightsched as ls
+from lightsched import scheduler
 from lightsched.scenes import city, move_lights
 
 # Each test runs with both kinds of object grid of the fast path (conftest.py).
@@ -645,6 +646,34 @@ def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_k
         assert "walked by 0 changed lights" in plans[1], plans[1]
         assert "for the next frames" in plans[1], plans[1]
         assert "take their pairs from their candidate lists" in plans[2], plans[2]
+
+
+def test_the_cell_edge_is_checked_again_as_lights_leave_a_few_at_a_time(grid_kind):
+    """Lights leaving the view change the competing set a little every frame: a kept grid
+    of every object has its cell edge checked against the lights again once EDGE_DRIFT of
+    them changed since the last check (not since last frame), so with the smaller lights
+    leaving two a frame (under 1% of the city's 300 each time) the grid ends with larger
+    cells; every frame as a scheduler's that makes everything anew."""
+    p = _Pair(ls.Config(max_lights=4))
+    scene = city(3_000, 300, seed=5)
+    lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
+    p.set_lights(**lights)
+    p.set_objects(**scene.objects)
+    cams = list(scene.cameras)
+    local = np.flatnonzero(lights["type"] != 2)
+    small = local[np.argsort(lights["radius"][local], kind="stable")][:local.size * 2 // 3]
+    edges = []
+    for i in range(0, small.size, 2):
+        gone = small[i:i + 2]
+        lights["position"][gone] = 1e6
+        p.update_lights(id=lights["id"][gone], position=lights["position"][gone])
+        fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i // 2}")
+        # Two lights a frame are within the drift: not checked again every frame.
+        assert 2 <= scheduler.EDGE_DRIFT * fa.stats["counts"]["competing_lights"] or i
+        edges.append(float(re.search(r"cells of ([0-9.]+) m", fa.stats["plan"]["pairs"])[1]))
+    if grid_kind == "every":
+        assert edges[-1] > 1.25 * edges[0], (edges[0], edges[-1])
 
 
 def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
