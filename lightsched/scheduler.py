@@ -14,9 +14,9 @@ A full frame computes every pair; an incremental one keeps the last frame's pair
 - lights whose fields changed, or that entered or left the view, walk the grid of objects
   again; the objects that held a pair of theirs or get one now rewrite their lists. Under
   still cameras and objects (and the contribution model, exact precision, no directional
-  light in the slots) the objects in the candidate lists of those lights instead take all
-  their pairs again from their lists (pairs.candidate_pairs on those rows): no walk, no
-  scan of the cache, no grouping;
+  light in the slots), when the last frame kept candidate lists, the objects in the lists
+  of those lights instead take all their pairs again from their lists
+  (pairs.candidate_pairs on those rows): no walk, no scan of the cache, no grouping;
 - objects that moved or came into view get new lists against every light (each tested
   against every light when they are few, else against the lights of the cells its box
   overlaps in a grid of the lights, kept while no light changes); in a grid of every
@@ -882,8 +882,8 @@ class Scheduler(SceneAPI):
         # sets the cost of the walks, never their pairs.
         radii = packed[0][:, 3]
         edge_of = c.grid.edge_of if kept else None
-        same_radii = (edge_of is not None and edge_of[0].shape == compete.shape
-                      and np.array_equal(radii, edge_of[1])
+        # (Radii of another light count are not equal: the compare below then never runs.)
+        same_radii = (edge_of is not None and np.array_equal(radii, edge_of[1])
                       and np.count_nonzero(compete != edge_of[0])
                       <= EDGE_DRIFT * np.count_nonzero(edge_of[0]))
         shape = None
