@@ -305,6 +305,15 @@ class Scheduler(SceneAPI):
         room += room // 8
         return (np.empty(room), np.empty(room, np.int32))
 
+    def _pair_room(self, cands: _Candidates, n: int, n_dir: int) -> int:
+        """The pair heap's room for a full frame from the candidate lists: a pair is a
+        candidate that passes the Affects test, or one of the ``n_dir`` directional lights
+        with each of the ``n`` objects. The objects' lists and the lights' hold the same
+        (light, object) candidates: the lights' lengths are 10x fewer to sum (at (1M, 100k)
+        the objects' took ~0.5 ms). Should it fall short, candidate_pairs writes nothing
+        and reports the exact room, which the frame then takes."""
+        return int(cands.by_light[0][:, 1].sum()) + n * n_dir
+
     # ------------------------------------------------------------------ the frame
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
@@ -643,13 +652,8 @@ class Scheduler(SceneAPI):
             assert cands is not None
             dir_rows = np.flatnonzero(compete & is_dir)
             c_seg, _, c_j, _ = cands.lists
-            # The objects' lists and the lights' hold the same (light, object) candidates:
-            # the lights' lengths are 10x fewer to sum (at (1M, 100k) the objects' took
-            # ~0.5 ms). candidate_pairs finds the exact room, and writes nothing if the
-            # heap is short of it.
-            room = int(cands.by_light[0][:, 1].sum()) + n * dir_rows.size
             seg = np.empty((n, 2), np.int64)
-            heap = self._new_heap(room)
+            heap = self._new_heap(self._pair_room(cands, n, dir_rows.size))
             args = (self._rows(n), (c_seg, c_j), cands.recs, packed, compete, dir_rows,
                     p_params)
             used, n_pairs = candidate_pairs(*args, (seg, *heap), 0)

@@ -648,6 +648,45 @@ def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_k
         assert "take their pairs from their candidate lists" in plans[2], plans[2]
 
 
+class _NoPairRoom(ls.Scheduler):
+    """Sizes the pair heap of a full frame from the candidate lists at nothing, as if the
+    lights' lists undercounted the objects': candidate_pairs then writes nothing and
+    reports the room it needs."""
+
+    short = 0  # full frames whose heap was sized here
+
+    def _pair_room(self, cands: Any, n: int, n_dir: int) -> int:
+        type(self).short += 1
+        return 0
+
+
+def test_a_full_frame_whose_pair_heap_is_short_takes_the_room_it_needs(grid_kind):
+    """A full frame from the candidate lists whose heap is short of its pairs pairs again
+    into a heap of the room candidate_pairs reports: every frame (every light moving, the
+    sun among them) is that of a scheduler whose heaps fit, and the pair count is the
+    cache's."""
+    scene = city(6_000, 600, seed=4, shadow_fraction=0.02, sun_shadows=True)
+    cfg = ls.Config(max_lights=6, shadow_budget=3)
+    a, b = _NoPairRoom(cfg), ls.Scheduler(cfg)
+    for s in (a, b):
+        s.set_lights(**scene.lights)
+        s.set_objects(**scene.objects)
+    _NoPairRoom.short = 0
+    for i in range(5):
+        position = move_lights(scene.lights, i)
+        for s in (a, b):
+            s.update_lights(id=scene.lights["id"], position=position)
+        fa, fb = a.frame(scene.cameras, dt=1 / 60), b.frame(scene.cameras, dt=1 / 60)
+        frames_identical(fa, fb, f"frame {i}")
+        assert fa.stats["counts"]["pairs"] == fb.stats["counts"]["pairs"] > 0
+        _check_counts(a, fa)
+    if grid_kind == "every":
+        assert "every pair from the objects' candidate lists" in fa.stats["plan"]["lists"]
+        assert _NoPairRoom.short >= 3, _NoPairRoom.short
+    else:
+        assert _NoPairRoom.short == 0
+
+
 def test_the_cell_edge_is_checked_again_as_lights_leave_a_few_at_a_time(grid_kind):
     """Lights leaving the view change the competing set a little every frame: a kept grid
     of every object has its cell edge checked against the lights again once EDGE_DRIFT of
