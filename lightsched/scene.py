@@ -147,6 +147,12 @@ _CAMERA_FIELDS = ("id", "position", "forward", "up", "fov_y", "aspect", "near", 
 
 
 def _camera_vector(name: str, i: int, value: Any, n: int) -> np.ndarray:
+    if type(value) is np.ndarray and value.shape == (n,) and value.dtype == np.float64:
+        # What the wire and the Python client send: three Python floats checked cost a
+        # third of numpy's checks on a three-element array (~0.6 against ~2 us).
+        values = value.tolist()
+        if all(map(math.isfinite, values)):
+            return np.array(values)
     try:
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -215,7 +221,7 @@ def validate_cameras(cameras: Any) -> list[Camera]:
         for name in ("fov_y", "aspect", "near", "far", "focus", "height_px"):
             if name == "focus":
                 focus = _camera_vector("focus", i, c.focus, 2)
-                if np.any(np.abs(focus) > 1.0):
+                if not (abs(float(focus[0])) <= 1.0 and abs(float(focus[1])) <= 1.0):
                     raise ValidationError("cameras.focus", i, "must be in [-1, 1]^2")
                 continue
             try:
@@ -262,10 +268,12 @@ def validate_dt(dt: Any) -> float:
 
 def _first_bad(mask: np.ndarray) -> int | None:
     """Index of the first True row of a per-row mask (rows may have trailing axes)."""
+    # Valid input is the rule: one any() then, ~1 us against ~6 for the row reduction.
+    if not mask.any():
+        return None
     if mask.ndim > 1:
-        mask = mask.reshape(mask.shape[0], int(np.prod(mask.shape[1:]))).any(axis=1)
-    idx = np.flatnonzero(mask)
-    return int(idx[0]) if idx.size else None
+        mask = mask.reshape(mask.shape[0], -1).any(axis=1)
+    return int(np.flatnonzero(mask)[0])
 
 
 def _parse(name: str, value: Any, n: int, kind: str, width: int = 0) -> np.ndarray:

@@ -68,7 +68,9 @@ def config_of(model: Any) -> ls.Config:
 
 def cameras_of(req: Any) -> list[ls.Camera]:
     try:
-        return validate_cameras([c.model_dump() for c in req.cameras])
+        # The models' own field maps (validate_cameras only reads them): model_dump would
+        # copy each at ~5 us a camera.
+        return validate_cameras([vars(c) for c in req.cameras])
     except ls.ValidationError as e:
         raise invalid(e) from None
 
