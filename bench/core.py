@@ -26,8 +26,10 @@ before ``s.frame(...)`` and not timed, only ``s.frame(...)`` is:
 
 Per size, the scenarios run interleaved run by run (a new Scheduler per run and scenario),
 so their ratios come from the same minutes. A run steps warm-up frames first (not timed; they
-include numba compilation): ``--warmup`` for ``full`` and ``all``, at least 20 for the others, so that
-the fades started by the first frames (0.25 s = 15 frames) are over. Scenarios other than
+include numba compilation): at least STEADY_WARMUP (90) for every scenario in motion, so that
+the candidate lists' lights, all anchored at the first frame, have left their spheres and
+walked again at their steady rate (earlier frames flatter the frame by ~10%), and 20 for
+``static``, so that the fades started by the first frames (0.25 s = 15 frames) are over. Scenarios other than
 ``full`` and ``all`` run only at N <= ``--incremental-up-to`` (default 100k). Reported per scenario:
 median of the run medians, their spread, p10..p90 of frame time, the median of each stage of
 ``frame.stats["seconds"]``, the last frame's ``stats["plan"]``, and issue 6's target.
@@ -97,6 +99,12 @@ DEFAULT_SCENARIOS = ",".join(SCENARIOS)
 DEFAULT_SIZES = "10k:1k,100k:10k,1M:100k"
 QUICK_SIZES, QUICK_SCENARIOS = "10k:1k,100k:10k", "full,static,lights10"
 INCREMENTAL_WARMUP = 20  # > fade_in / fade_out (0.25 s = 15 frames at 60 fps)
+# Frames before a scene in motion is timed: the candidate lists are made at the first frame,
+# every light anchored at once, and the lights (3 m/s, radii 5..30 m) leave their widened
+# spheres over the next ~20-120 frames; before that they walk far fewer than they will
+# for good. At (100k, 10k) `full` gave 6.5 ms over frames 3-23 and 7.2 over frames 100-300
+# (pairs 0.48 -> 1.02 ms; SKIN 0.1; bench/RESULTS.md, seventeenth session).
+STEADY_WARMUP = 90
 LIGHT_FRACTIONS = {"lights10": 0.10, "lights1": 0.01}
 OBJECT_FRACTIONS = {"objects1": 0.01, "objects10": 0.10}
 CAMERA_STEP = 0.5  # metres per frame along the orbit
@@ -155,7 +163,7 @@ class Motion:
     def __init__(self, name: str, scene: Any, seed: int) -> None:
         self.name, self.scene = name, scene
         self.cameras = list(scene.cameras)
-        self.warmup_min = 0 if name in FULL else INCREMENTAL_WARMUP
+        self.warmup_min = INCREMENTAL_WARMUP if name == "static" else STEADY_WARMUP
         lights, objects = scene.lights, scene.objects
         if name in LIGHT_FRACTIONS:
             rng = np.random.default_rng([seed, 610])
@@ -454,10 +462,11 @@ def render(results: list[dict[str, Any]], shadow: list[dict[str, Any]],
            f"K = {args.max_lights}, default Config (fade on, exact precision, shadow_budget 4). "
            "Only `Scheduler.frame` is timed; the scene change before it is not. Per size the "
            f"scenarios run interleaved: {args.runs} runs (a new Scheduler each) of "
-           f"{args.frames} frames after {args.warmup} warm-up frames (`full`, `all`) or "
-           f"{max(args.warmup, INCREMENTAL_WARMUP)} (the others, so the first frames' fades "
-           "are over); \"median\" is the median of the runs' medians, stage times are "
-           "medians over all timed frames.", "",
+           f"{args.frames} frames after {max(args.warmup, STEADY_WARMUP)} warm-up frames "
+           f"({max(args.warmup, INCREMENTAL_WARMUP)} for `static`): the candidate lists, all "
+           "made at the first frame, have had their lights leave and walk again at the rate "
+           "they will for good, and the first frames' fades are over; \"median\" is the "
+           "median of the runs' medians, stage times are medians over all timed frames.", "",
            "Scenarios: `full` every light moves every frame (`update_lights` with every id; "
            "the objects and the camera stay, so their visibility and grid are kept); `all` "
            "every light moves and the camera moves as in `camera` (every stage runs); "
@@ -596,8 +605,8 @@ def main(argv: list[str] | None = None) -> int:
                         "with N up to this (default 100k)")
     p.add_argument("--frames", type=int, default=20, help="timed frames per run (default 20)")
     p.add_argument("--warmup", type=int, default=3,
-                   help=f"warm-up frames (default 3; scenarios other than full use at least "
-                        f"{INCREMENTAL_WARMUP})")
+                   help=f"warm-up frames (default 3; scenarios in motion use at least "
+                        f"{STEADY_WARMUP}, static {INCREMENTAL_WARMUP})")
     p.add_argument("--runs", type=int, default=3,
                    help="runs per size and scenario, each with a new Scheduler (default 3)")
     p.add_argument("--max-lights", type=int, default=8, help="K (default 8)")
