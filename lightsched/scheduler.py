@@ -137,6 +137,9 @@ REANCHOR = 256.0
 # lights walking a frame), 0.1 13.6 (570), 0.2 14.6 (255); 0.1 keeps the walks, and their
 # spikes, small when lights move faster (RESULTS.md, candidate lists).
 SKIN = 0.1
+# A light walked again centres its widened sphere this share of SKIN x radius ahead of it,
+# along its last frame's step (the sphere still holds it: LEAD < 1).
+LEAD = 0.8
 # Lists are made again from scratch when more than this share of the lights left theirs.
 REBUILD_SHARE = 0.5
 # False: full frames walk every light as when nothing is kept (the tests compare the two).
@@ -551,12 +554,14 @@ class Scheduler(SceneAPI):
         # next frames. The candidates' stream only: the contribution model, float64
         # records, no directional light in the slots.
         changed_l = None if full else np.union1d(lrows, np.flatnonzero(compete != c.compete))
+        # Where each light was last frame (rows unchanged), for the lists' lead (LEAD).
+        last_position = c.lights["position"] if c is not None and lrows is not None else None
         lists_path = (not full and cands_valid and same_cams and cfg.model == "contribution"
                       and not fast and not cfg.directional_in_slots)
         by_lists = lists_path and cands is not None and changed_l.size > 0
         if full and cands_valid:
             cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid,
-                                                  not same_cams)
+                                                  not same_cams, last_position)
             fresh = None
             plan["pairs"] += cands_plan(built, walk)
             walked = np.zeros(0, np.int64)
@@ -565,7 +570,8 @@ class Scheduler(SceneAPI):
             # and (lists stage) those of lights whose shadow map or "skip" status changed.
             reach = np.zeros(n, np.bool_)
             list_objects(cands.by_light, changed_l, reach)
-            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid, False)
+            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid, False,
+                                                  last_position)
             list_objects(cands.by_light, walk, reach)
             fresh = None
             walked = changed_l
@@ -610,7 +616,8 @@ class Scheduler(SceneAPI):
                               f"new pairs {how} {int(compete.sum())} lights; "
                               f"{left_rows.size} objects left the view")
             if lists_path and cands is None:
-                cands, walk, _ = self._candidates(None, packed, compete, is_dir, grid, False)
+                cands, walk, _ = self._candidates(None, packed, compete, is_dir, grid, False,
+                                                  last_position)
                 plan["pairs"] += cands_plan(True, walk) + " for the next frames"
         t = _lap(seconds, "pairs", t)
 
@@ -1016,7 +1023,8 @@ class Scheduler(SceneAPI):
                             p_params, len(objs))
 
     def _candidates(self, old: _Candidates | None, packed: tuple[np.ndarray, np.ndarray],
-                    compete: np.ndarray, is_dir: np.ndarray, grid: _Grid, hidden: bool
+                    compete: np.ndarray, is_dir: np.ndarray, grid: _Grid, hidden: bool,
+                    last_position: np.ndarray | None = None
                     ) -> tuple[_Candidates, int, bool]:
         """The candidate lists for this frame's lights (``old`` valid or None): a competing
         point or spot light keeps its candidates while its sphere lies inside the one they
@@ -1056,8 +1064,16 @@ class Scheduler(SceneAPI):
         wide[:, 5] = np.arange(n_l) * 32.0
 
         def walk_of(mask: np.ndarray) -> tuple[np.ndarray, ...]:
-            rows = light_order(hot, np.flatnonzero(mask).astype(np.int32), grid.grid[0],
-                               grid.grid[1])
+            sel = np.flatnonzero(mask)
+            if last_position is not None and sel.size:
+                # Centred ahead of a moving light, along its last step: it crosses the
+                # widened sphere before it leaves it, ~(1 + LEAD) x as many frames.
+                step = self.lights.position[sel] - last_position[sel]
+                length = np.sqrt((step * step).sum(axis=1))
+                going = length > 0.0
+                ahead = LEAD * SKIN * hot[sel[going], 3] / length[going]
+                wide[sel[going], :3] = hot[sel[going], :3] + ahead[:, None] * step[going]
+            rows = light_order(hot, sel.astype(np.int32), grid.grid[0], grid.grid[1])
             p_params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
             if not hold:
                 return self._walk((wide, packed[1]), rows, grid, p_params, "cand")
@@ -1112,7 +1128,7 @@ class Scheduler(SceneAPI):
             out = _Candidates(np.zeros((n_l, 4)), lists, by_light, used,
                               (box, box.view(grid.vis[1].dtype)), hold)
         walk = walked[0][:walked[0].size - gone.size]
-        out.anchor[walk, :3] = hot[walk, :3]
+        out.anchor[walk, :3] = wide[walk, :3]
         out.anchor[walk, 3] = wide[walk, 3]
         out.anchor[gone, 3] = 0.0
         return out, walked[0], old is None
