@@ -135,7 +135,8 @@ REANCHOR = 256.0
 # 5..30 m, 3 m/s) a wider skin means more candidates to test, a narrower one more lights
 # walking again: at (100k, 10k), frames 70-90 of `full` (medians), 0.05 gave 13.5 ms (1.1k
 # lights walking a frame), 0.1 13.6 (570), 0.2 14.6 (255); 0.1 keeps the walks, and their
-# spikes, small when lights move faster (RESULTS.md, candidate lists).
+# spikes, small when lights move faster (RESULTS.md, candidate lists). Measured again in
+# steady state with the candidates' stream (2026-11-27): 0.2 no faster (+0.07 ms paired).
 SKIN = 0.1
 # A light walked again centres its widened sphere this share of SKIN x radius ahead of it,
 # along its last frame's step (the sphere still holds it: LEAD < 1).
@@ -1029,8 +1030,10 @@ class Scheduler(SceneAPI):
         """The candidate lists for this frame's lights (``old`` valid or None): a competing
         point or spot light keeps its candidates while its sphere lies inside the one they
         were found with (pairs.left_spheres); the others walk the grid again with
-        their sphere widened by SKIN, range test only (every light mask bit: the lists must
-        not depend on the lights' masks, which may change while they are kept), a light
+        their sphere widened by SKIN and centred ahead along their last step (LEAD, given
+        ``last_position``, each light's position last frame), range test only (every
+        light mask bit: the lists must not depend on the lights' masks, which may change
+        while they are kept), a light
         that turned directional is dropped from them, and the
         lists of the objects they leave or enter are edited in place (pairs.edit_candidates;
         a list that outgrows its room moves to the spare room). All are made again when
