@@ -1033,8 +1033,7 @@ class Scheduler(SceneAPI):
         their sphere widened by SKIN and centred ahead along their last step (LEAD, given
         ``last_position``, each light's position last frame), range test only (every
         light mask bit: the lists must not depend on the lights' masks, which may change
-        while they are kept), a light
-        that turned directional is dropped from them, and the
+        while they are kept), a light that turned directional is dropped from them, and the
         lists of the objects they leave or enter are edited in place (pairs.edit_candidates;
         a list that outgrows its room moves to the spare room). All are made again when
         there are none, most lights left theirs, or the spare room ran out; made with
