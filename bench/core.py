@@ -26,11 +26,12 @@ before ``s.frame(...)`` and not timed, only ``s.frame(...)`` is:
 
 Per size, the scenarios run interleaved run by run (a new Scheduler per run and scenario),
 so their ratios come from the same minutes. A run steps warm-up frames first (not timed; they
-include numba compilation): at least STEADY_WARMUP (90) for every scenario in motion, so that
-the candidate lists' lights, all anchored at the first frame, have left their spheres and
-walked again at their steady rate (earlier frames flatter the frame by ~10%), and 20 for
-``static``, so that the fades started by the first frames (0.25 s = 15 frames) are over. Scenarios other than
-``full`` and ``all`` run only at N <= ``--incremental-up-to`` (default 100k). Reported per scenario:
+include numba compilation): at least STEADY_WARMUP (90) for every scenario in motion, so
+that the candidate lists' lights, all anchored at the first frame, have left their spheres
+and walked again at their steady rate (earlier frames flatter the frame by ~10%), and 20
+for ``static``, so that the fades started by the first frames (0.25 s = 15 frames) are
+over. Scenarios other than ``full`` and ``all`` run only at N <= ``--incremental-up-to``
+(default 100k). Reported per scenario:
 median of the run medians, their spread, p10..p90 of frame time, the median of each stage of
 ``frame.stats["seconds"]``, the last frame's ``stats["plan"]``, and issue 6's target.
 

@@ -1073,8 +1073,9 @@ class Scheduler(SceneAPI):
                 step = self.lights.position[sel] - last_position[sel]
                 length = np.sqrt((step * step).sum(axis=1))
                 going = length > 0.0
-                ahead = LEAD * SKIN * hot[sel[going], 3] / length[going]
-                wide[sel[going], :3] = hot[sel[going], :3] + ahead[:, None] * step[going]
+                moving, step, length = sel[going], step[going], length[going]
+                ahead = LEAD * SKIN * hot[moving, 3] / length
+                wide[moving, :3] = hot[moving, :3] + ahead[:, None] * step
             rows = light_order(hot, sel.astype(np.int32), grid.grid[0], grid.grid[1])
             p_params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
             if not hold:
