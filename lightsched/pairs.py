@@ -1388,6 +1388,19 @@ def _room_for(m):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
+def row_lengths(rows, seg_a, seg_b):
+    """(The lengths seg_a[rows, 1] summed, seg_b[rows, 1] summed) in one pass: an
+    incremental frame's room for its objects' candidates and the pairs their old lists
+    held (numpy's fancy-indexed sum took ~47 us each for 44k of 100k rows)."""
+    a = 0
+    b = 0
+    for r in range(rows.shape[0]):
+        a += seg_a[rows[r], 1]
+        b += seg_b[rows[r], 1]
+    return a, b
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def list_objects(by_light, lights, mark):
     """Marks (True in ``mark``) the objects in the candidate lists of the light rows
     ``lights`` (by_light = (seg [L, 2], object rows), as light_lists keeps them)."""

@@ -352,10 +352,11 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
 
 
 def _check_counts(s: ls.Scheduler, f: ls.Frame) -> None:
-    """The frame's pair count is its cache's, and the objects' and the lights' candidate
-    lists hold as many candidates (a full frame sizes its pair heap from the lights')."""
+    """The frame's pair count is its cache's (kept as a count, summed here), and the
+    objects' and the lights' candidate lists hold as many candidates (a full frame sizes
+    its pair heap from the lights')."""
     c = s._cache
-    assert f.stats["counts"]["pairs"] == int(c.seg[:, 1].sum())
+    assert f.stats["counts"]["pairs"] == c.pairs == int(c.seg[:, 1].sum())
     if c.cands is not None:
         assert int(c.cands.lists[0][:, 1].sum()) == int(c.cands.by_light[0][:, 1].sum())
 
