@@ -490,7 +490,8 @@ class Scheduler(SceneAPI):
         # once it is made): at (1M, 100k) a fresh 50 MB array (over glibc's 32 MB mmap
         # threshold) was mapped and faulted in again every other frame: the records kernel
         # took ~70 ms, not 20.
-        if full:
+        if full or objects_kept:
+            # (Kept objects: the visibility is last frame's array; nothing entered or left.)
             fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
             moved = np.zeros(n, np.bool_)
