@@ -1071,14 +1071,17 @@ class Scheduler(SceneAPI):
                 # found nothing.
                 gone = np.flatnonzero(is_dir & (old.anchor[:, 3] > 0))
         # The walk as the light pass's with every light a point light of the widened radius
-        # and every mask bit (its P are not used).
-        wide = hot.copy()
-        wide[:, 3] *= 1.0 + SKIN
-        wide[:, 4] = float(0xFFFFFFFF)
-        wide[:, 5] = np.arange(n_l) * 32.0
+        # and every mask bit (its P are not used). The walk reads the rows of the lights it
+        # walks only: those are written, into a kept buffer (the copy of every row and its
+        # three columns took 0.34 ms at 100k lights, against 0.05 for 2000 rows).
+        wide = self._scratch("wide", n_l * 8, np.float64)[:n_l * 8].reshape(n_l, 8)
 
         def walk_of(mask: np.ndarray) -> tuple[np.ndarray, ...]:
             sel = np.flatnonzero(mask)
+            wide[sel] = hot[sel]
+            wide[sel, 3] *= 1.0 + SKIN
+            wide[sel, 4] = float(0xFFFFFFFF)
+            wide[sel, 5] = sel * 32.0
             if last_position is not None and sel.size:
                 # Centred ahead of a moving light, along its last step: it crosses the
                 # widened sphere before it leaves it, ~(1 + LEAD) x as many frames.
