@@ -103,8 +103,8 @@ INCREMENTAL_WARMUP = 20  # > fade_in / fade_out (0.25 s = 15 frames at 60 fps)
 # Frames before a scene in motion is timed: the candidate lists are made at the first frame,
 # every light anchored at once, and the lights (3 m/s, radii 5..30 m) leave their widened
 # spheres over the next ~20-120 frames; before that they walk far fewer than they will
-# for good. At (100k, 10k) `full` gave 6.5 ms over frames 3-23 and 7.2 over frames 100-300
-# (pairs 0.48 -> 1.02 ms; SKIN 0.1; bench/RESULTS.md, seventeenth session).
+# for good. A 400-frame `full` (100k, 10k) sequence took 6.14 ms over frames 3-23 and 7.65
+# over frames 100-400 (pairs 0.46 -> 1.00 ms; SKIN 0.1; bench/RESULTS.md, issue 6 targets).
 STEADY_WARMUP = 90
 LIGHT_FRACTIONS = {"lights10": 0.10, "lights1": 0.01}
 OBJECT_FRACTIONS = {"objects1": 0.01, "objects10": 0.10}

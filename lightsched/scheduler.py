@@ -1146,8 +1146,7 @@ class Scheduler(SceneAPI):
             out = _Candidates(np.zeros((n_l, 4)), lists, by_light, used,
                               (box, box.view(grid.vis[1].dtype)), hold)
         walk = walked[0][:walked[0].size - gone.size]
-        out.anchor[walk, :3] = wide[walk, :3]
-        out.anchor[walk, 3] = wide[walk, 3]
+        out.anchor[walk] = wide[walk, :4]
         out.anchor[gone, 3] = 0.0
         return out, walked[0], old is None
 
