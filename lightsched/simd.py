@@ -1132,16 +1132,21 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
             with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
                 maps = _at_rows(b, data(7, 0, _I8), old_rows)
                 has = b.and_(first, b.icmp_signed(">=", maps, splat(0, v8i8)))
-                rank = splat(0, _VI64)
-                for r in range(1, LANES):
-                    w_r = turn(w, r)
-                    earlier = ir.Constant(_VB, [int((i + r) % LANES < i) for i in range(LANES)])
-                    before = b.or_(b.fcmp_ordered(">", w_r, w),
-                                   b.and_(b.fcmp_ordered("==", w_r, w), earlier))
-                    rank = b.add(rank, b.zext(b.and_(turn(has, r), before), _VI64))
-                q64 = context.cast(b, q, signature.args[7][1], types.int64)
-                keep = b.and_(has, b.icmp_signed("<", rank, _splat(b, q64, _VI64)))
-                b.store(b.select(keep, maps, splat(-1, v8i8)), map_slot)
+                # Few objects hold a light with a map (the suns are not in slots): the
+                # ranking below is skipped for the others.
+                with b.if_then(b.icmp_unsigned("!=", b.bitcast(has, _I8), ir.Constant(_I8, 0)),
+                               likely=False):
+                    rank = splat(0, _VI64)
+                    for r in range(1, LANES):
+                        w_r = turn(w, r)
+                        earlier = ir.Constant(_VB, [int((i + r) % LANES < i)
+                                                    for i in range(LANES)])
+                        before = b.or_(b.fcmp_ordered(">", w_r, w),
+                                       b.and_(b.fcmp_ordered("==", w_r, w), earlier))
+                        rank = b.add(rank, b.zext(b.and_(turn(has, r), before), _VI64))
+                    q64 = context.cast(b, q, signature.args[7][1], types.int64)
+                    keep = b.and_(has, b.icmp_signed("<", rank, _splat(b, q64, _VI64)))
+                    b.store(b.select(keep, maps, splat(-1, v8i8)), map_slot)
             b.store(b.load(map_slot), row(6, 7, _I8), align=1)
             b.store(b.load(cand_slot), result)
         return b.load(result)
