@@ -1499,6 +1499,18 @@ def edit_candidates(walked, lists, by_light):
     return ok.all()
 
 
+def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """object_pass's live_id: per light row its id (int32) where ``live``, else -2 (not
+    -1, the id of an empty slot). One table, so the object pass reads one entry a pair
+    where it read the id and the live flag: held_row gathers eight lanes of it, and the
+    gather of the flags was ~5% of the pass (bench/RESULTS.md)."""
+    if out is None or out.shape != ids.shape:
+        out = np.empty(ids.shape, np.int32)
+    np.copyto(out, ids)
+    out[~live] = -2
+    return out
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _match_old_slot(p, j, lid, sf, si):
     """Records this frame's P and row for the object's old slot of light lid, if any.
@@ -1512,32 +1524,32 @@ def _match_old_slot(p, j, lid, sf, si):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _select(p, j, ids, sf, si, nbest, h, h_abs):
-    """Offers light row j with priority p to the object's top K (select.py): hysteresis
-    key, insert, and this frame's P / row for the object's old slot of that light.
-    Returns nbest."""
-    lid = np.int64(ids[j])
+def _select(p, j, lid, sf, si, nbest, h, h_abs):
+    """Offers light row j (id lid) with priority p to the object's top K (select.py):
+    hysteresis key, insert, and this frame's P / row for the object's old slot of that
+    light. Returns nbest."""
     _match_old_slot(p, j, lid, sf, si)
     return topk_insert(sf, si, nbest, hysteresis_key(p, lid, si, h, h_abs), lid, p, j)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
+def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
-    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the heap,
-    heap = (P float64 [H], light row int32 [H])): the pair cache; lights = (light id by row,
-    live by row: visible, and not removed by unshadowed = "skip"; pairs of other lights are
-    kept in the cache but do not compete); state = (slot ids, slot weights f64, slot states,
-    selected ids), each [N, K]: the ids and states are last frame's light_ids and fade_state
-    outputs, the weights and selection are updated in place; out = (light_ids, light_index,
-    priority f32, fade_weight f32, fade_state, count, candidates, slot_shadow int8, fading
-    bool [N]: a slot is fading in or out); params = (h, h_abs, dt/fade_in, dt/fade_out,
-    fade_in, fade_out); shadow = (shadow map index per light row or -1,
-    max_shadowed_per_object); k_static = a tuple of K zeros if K is in STATIC_K, else ().
+    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the
+    heap, heap = (P float64 [H], light row int32 [H])): the pair cache; live_id = per light
+    row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
+    (``live_ids``; pairs of other lights are kept in the cache but do not compete); state =
+    (slot ids, slot weights f64, slot states, selected ids), each [N, K]: the ids and states
+    are last frame's light_ids and fade_state outputs, the weights and selection are updated
+    in place; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
+    count, candidates, slot_shadow int8, fading bool [N]: a slot is fading in or out);
+    params = (h, h_abs, dt/fade_in, dt/fade_out, fade_in, fade_out); shadow = (shadow map
+    index per light row or -1, max_shadowed_per_object); k_static = a tuple of K zeros if K
+    is in STATIC_K, else ().
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
@@ -1548,7 +1560,6 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
     """
     visible, reset = objs
     seg, (heap_p, heap_j) = lists
-    ids, live = lights
     s_id, s_w, s_st, s_sel = state
     o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow, o_fading = out
     shadow_of_row, max_shadowed = shadow
@@ -1576,7 +1587,7 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
             o = run[r]
             if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
                 # The common case in vector code: slots held in last frame's order.
-                cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), lights, state,
+                cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), (live_id,), state,
                                 out, held_rules)
                 if cand >= 0:
                     o_count[o] = min(cand, k)
@@ -1600,10 +1611,10 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                 # the common case: then every one is selected, no keys, no ranking.
                 for t in range(a, b):
                     j = np.int64(heap_j[t])
-                    if live[j]:
+                    lid = np.int64(live_id[j])
+                    if lid >= 0:
                         if cand < k:
                             p = heap_p[t]
-                            lid = np.int64(ids[j])
                             _match_old_slot(p, j, lid, sf, si)
                             sf[F_P, cand] = p
                             si[I_ID, cand] = lid
@@ -1617,8 +1628,9 @@ def object_pass(run, objs, lists, lights, state, out, params, shadow, k_static):
                         si[I_PREV_SEL, m] = s_sel[o, m]
                     for t in range(a, b):
                         j = np.int64(heap_j[t])
-                        if live[j]:
-                            nbest = _select(heap_p[t], j, ids, sf, si, nbest, h, h_abs)
+                        lid = np.int64(live_id[j])
+                        if lid >= 0:
+                            nbest = _select(heap_p[t], j, lid, sf, si, nbest, h, h_abs)
                 held = False
                 if not reset[o] and all_on and n_old == nbest:
                     # Held when every old slot holds a selected light (filled slots come

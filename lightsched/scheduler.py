@@ -76,6 +76,7 @@ from .pairs import (
     light_pass,
     list_objects,
     list_room,
+    live_ids,
     move_records,
     object_pass,
     replace_lists,
@@ -768,7 +769,8 @@ class Scheduler(SceneAPI):
         if run.size:
             params = np.array([cfg.hysteresis, cfg.hysteresis_abs, _rate(dt, cfg.fade_in),
                                _rate(dt, cfg.fade_out), cfg.fade_in, cfg.fade_out])
-            object_pass(run, (_read_only(vis_o), reset), (seg, heap), (lights.id, live), state,
+            live_id = live_ids(lights.id, live, self._scratch("live_id", n_l, np.int32)[:n_l])
+            object_pass(run, (_read_only(vis_o), reset), (seg, heap), live_id, state,
                         tuple(out[name] for name in _OUT) + (fading,), params,
                         (shadow_of_row, cfg.max_shadowed_per_object),
                         (0,) * k if k in STATIC_K else ())

@@ -868,13 +868,13 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
     return sig, codegen
 
 
-# The dtypes held_row reads and writes: heap (P, light row), lights (id, live), state
+# The dtypes held_row reads and writes: heap (P, light row), lights (live_id), state
 # (slot ids, slot weights, slot states, selection), out (pairs.object_pass's nine) and
 # rules (map index per light row; the others are checked by kind), as the scheduler
 # passes them.
 _HELD_TYPES = (
     ((types.float64, 1), (types.int32, 1)),
-    ((types.int32, 1), (types.boolean, 1)),
+    ((types.int32, 1),),
     ((types.int32, 2), (types.float64, 2), (types.uint8, 2), (types.int32, 2)),
     ((types.int32, 2), (types.int32, 2), (types.float32, 2), (types.float32, 2),
      (types.uint8, 2), (types.int32, 1), (types.int32, 1), (types.int8, 2),
@@ -913,14 +913,14 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     in pair order, or by key), slot_shadow (pick_slot_shadows: at most ``rules[1]``
     slots whose light has a map, by weight, then output order) and the fading flag, and
     returns the number of competing lights (the count is that, at most K). Arguments as
-    pairs.object_pass has them (heap = (P, light row), lights = (id, live) by light row,
-    state, out) and rules = (map index per light row, how many slots may take one: 0
-    when no light has a map, h, hysteresis_abs, dt/fade_in, fade_in); K = 8 (the caller
-    checks). For arrays of other dtypes or layouts (none the scheduler passes) returns -1
-    at once.
+    pairs.object_pass has them (heap = (P, light row), lights = (live_id,): by light row
+    its id when live, else -2; state, out) and rules = (map index per light row, how
+    many slots may take one: 0 when no light has a map, h, hysteresis_abs, dt/fade_in,
+    fade_in); K = 8 (the caller checks). For arrays of other dtypes or layouts (none the
+    scheduler passes) returns -1 at once.
 
     Eight lanes, one pair each (two vectors of them from 9 pairs): the pairs loaded
-    masked, each light's live flag and id read at its row, and every rotation of the
+    masked, each light's live_id read at its row, and every rotation of the
     selected ids compared with the old slots, which both checks that they are the same
     set and carries each pair's P, row and key to its old slot; one compare of each slot
     with the next checks the order, and each output row is one vector store. (A sorting
@@ -975,15 +975,16 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
                          b.and_(b.fcmp_ordered("==", xp, yp), b.icmp_signed("<", xid, yid)))
 
         def pairs(start, lanes):
-            """(P, light row, id, live) of eight pairs from heap record ``start``;
+            """(P, light row, live_id, live) of eight pairs from heap record ``start``;
             ``lanes`` are pairs, the others read light row 0, which exists (the object
-            has a pair) and are not live."""
+            has a pair) and are not live. A lane's live_id is its light's id where live
+            (then >= 0), -2 elsewhere."""
             p_at = b.bitcast(b.gep(data(3, 0, _F64), [start]), ir.PointerType(_VF))
             p = _masked_load(b, p_at, lanes, splat(0.0, _VF))
             rows_at = b.bitcast(b.gep(data(3, 1, _I32), [start]), ir.PointerType(_VI32))
             rows = _masked_load(b, rows_at, lanes, splat(0, _VI32))
-            live = b.icmp_unsigned("!=", _at_rows(b, data(4, 1, _I8), rows), splat(0, v8i8))
-            return p, rows, _at_rows(b, data(4, 0, _I32), rows), b.and_(lanes, live)
+            ids = _at_rows(b, data(4, 0, _I32), rows)
+            return p, rows, ids, b.and_(lanes, b.icmp_signed(">=", ids, splat(0, _VI32)))
 
         old = b.load(row(5, 0, _I32), align=4)
         has_old = b.icmp_signed(">=", old, splat(0, _VI32))

@@ -21,7 +21,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.pairs import OBJECT_CHUNK, _finish_hits, candidate_pairs, object_pass, visible_objects
+from lightsched.pairs import (
+    OBJECT_CHUNK,
+    _finish_hits,
+    candidate_pairs,
+    live_ids,
+    object_pass,
+    visible_objects,
+)
 from lightsched.pairs import scalar_candidates as pairs_scalar
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
 from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
@@ -97,7 +104,7 @@ def _compiled(in_register: bool):
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
-        held(0, 0, 1, case[2][1], case[3], case[4], case[5], held_rules(case))
+        held(0, 0, 1, case[2][1], (case[3],), case[4], case[5], held_rules(case))
         return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
@@ -138,17 +145,18 @@ def held_case(rng, kinds, n_l, max_shadowed, ties, fade_in=0.2):
             sel = rng.permutation(old)
         objects.append((kind, p, rows, old, states, sel))
     shadow_of_row = rng.choice(np.array([-1, -1, 0, 1, 2, 3], np.int8), n_l)
-    return pass_arguments(rng, objects, (ids, live), shadow_of_row, max_shadowed, fade_in)
+    return pass_arguments(rng, objects, live_ids(ids, live), shadow_of_row, max_shadowed,
+                          fade_in)
 
 
-def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed, fade_in=0.2):
+def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0.2):
     """pairs.object_pass's arguments (K = 8) for objects = [(kind, P and light rows of
     its pairs, last frame's slot ids and states, last frame's selection)] (kinds "reset"
     and "hidden" as held_case's), with a few pairs of no object between them; slots not
     on have weights of a few values (ties, one a step short of 1 within 1e-6) or any."""
     k = simd.LANES
     n = len(objects)
-    n_l = lights[0].size
+    n_l = live_id.size
     seg = np.zeros((n, 2), np.int64)
     heap_p, heap_j = [rng.uniform(-5, 5, 3)], [rng.integers(0, n_l, 3)]
     s_id = np.full((n, k), -1, np.int32)
@@ -174,7 +182,7 @@ def pass_arguments(rng, objects, lights, shadow_of_row, max_shadowed, fade_in=0.
            np.full((n, k), -9, np.int8), np.ones(n, np.bool_))
     params = np.array([0.1, 0.05, 0.25 if fade_in else 1.0, 0.25, fade_in, 0.2])
     heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
-    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), lights,
+    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), live_id,
             (s_id, s_w, s_st, s_sel), out, params, (shadow_of_row, np.int64(max_shadowed)),
             (0,) * k)
 
@@ -192,13 +200,13 @@ def check_held(case, kinds, packings):
     bit for bit; and held_row alone, for each packing, gives each object's row of them
     or -1 with nothing written, and takes every "held" and "fading" object of 1-8 pairs,
     or of 9-16 pairs with more than 8 competing."""
-    run, objs, (seg, heap), lights, state, out, params, shadow, k_static = case
+    run, objs, (seg, heap), live_id, state, out, params, shadow, k_static = case
     strided = np.zeros(2 * heap[0].size)[::2]
     strided[:] = heap[0]
     want = copy.deepcopy((state, out))
-    object_pass(run, objs, (seg, (strided, heap[1])), lights, *want, params, shadow, k_static)
+    object_pass(run, objs, (seg, (strided, heap[1])), live_id, *want, params, shadow, k_static)
     got = copy.deepcopy((state, out))
-    object_pass(run, objs, (seg, heap), lights, *got, params, shadow, k_static)
+    object_pass(run, objs, (seg, heap), live_id, *got, params, shadow, k_static)
     for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
     rules = held_rules(case)
@@ -208,7 +216,7 @@ def check_held(case, kinds, packings):
             if not objs[0][o] or objs[1][o] or not 1 <= n <= 2 * simd.LANES:
                 continue
             mine = copy.deepcopy((state, out))
-            cand = HELD[packing](o, seg[o, 0], n, heap, lights, *mine, rules)
+            cand = HELD[packing](o, seg[o, 0], n, heap, (live_id,), *mine, rules)
             wide = want[1][6][o] > simd.LANES
             taken = kind in ("held", "fading") and (n > simd.LANES) == wide
             assert cand >= 0 or not taken, (o, kind)
@@ -665,7 +673,7 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
     seg = case[2][0]
-    taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], case[3],
+    taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], (case[3],),
                                 *copy.deepcopy((case[4], case[5])), held_rules(case))
              for o in range(len(kinds)) if 1 <= seg[o, 1] <= 2 * simd.LANES]
     held = [cand for cand in taken if cand >= 0]
@@ -691,10 +699,10 @@ def test_held_row_keeps_the_selection_by_key():
     old = ids[:8].copy()
     objects = [("held", p, rows, old, np.full(8, ON), old[::-1].copy())]
     rng = np.random.default_rng(3)
-    case = pass_arguments(rng, objects, (ids, np.ones(9, np.bool_)),
+    case = pass_arguments(rng, objects, live_ids(ids, np.ones(9, np.bool_)),
                           np.full(9, -1, np.int8), 0)
     check_held(case, ["keys tie"], PACKINGS)
-    assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], case[3],
+    assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], (case[3],),
                               *copy.deepcopy((case[4], case[5])), held_rules(case)) == -1
 
 
