@@ -1351,24 +1351,24 @@ def spread_lists(start, light_j, lists):
                 cand[seg[o, 0] + t] = light_j[start[o] + t]
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def compact_light_lists(by_light, spare):
     """The lists by light row packed into a new array with ``spare`` free records after
     them (the segments light_lists left behind are garbage); returns (seg, object rows,
-    records used)."""
+    records used). The lists, appended frame after frame, lie scattered over the old
+    array: copied one light a time in parallel, each a slice (one element at a time on
+    one thread, ~2.5 ms at (100k, 10k) once every ~40-80 frames; bench/RESULTS.md)."""
     l_seg, l_obj = by_light
-    used = 0
-    for j in range(l_seg.shape[0]):
-        used += l_seg[j, 1]
-    new_seg = np.zeros_like(l_seg)
-    new_obj = np.empty(used + spare, np.int32)
+    new_seg = np.empty_like(l_seg)
     at = 0
     for j in range(l_seg.shape[0]):
         new_seg[j, 0] = at
         new_seg[j, 1] = l_seg[j, 1]
-        for e in range(l_seg[j, 0], l_seg[j, 0] + l_seg[j, 1]):
-            new_obj[at] = l_obj[e]
-            at += 1
+        at += l_seg[j, 1]
+    new_obj = np.empty(at + spare, np.int32)
+    for j in nb.prange(l_seg.shape[0]):
+        a, m, b = l_seg[j, 0], l_seg[j, 1], new_seg[j, 0]
+        new_obj[b:b + m] = l_obj[a:a + m]
     return new_seg, new_obj, at
 
 

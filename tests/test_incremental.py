@@ -383,6 +383,27 @@ def _city_pair(cfg: ls.Config, seed: int, shadowed: float, inner: float
     return p, lights, objects, list(scene.cameras)
 
 
+def test_compacted_light_lists_hold_each_lights_list_in_order():
+    """pairs.compact_light_lists: the lists by light, scattered over an array with garbage
+    between them (as light_lists leaves them), packed in light order from 0, each list's
+    objects in their order, with the asked-for room after them."""
+    from lightsched.pairs import compact_light_lists
+
+    rng = np.random.default_rng(11)
+    n_l = 300
+    lengths = rng.integers(0, 40, n_l)
+    lengths[:3] = 0
+    starts = rng.permutation(n_l) * 50 + rng.integers(0, 10, n_l)
+    l_obj = rng.integers(0, 10_000, 50 * n_l + 64).astype(np.int32)
+    l_seg = np.stack([starts, lengths], 1).astype(np.int64)
+    seg, obj, used = compact_light_lists((l_seg, l_obj), 123)
+    assert used == lengths.sum() and obj.size == used + 123 and obj.dtype == np.int32
+    assert np.array_equal(seg[:, 1], lengths)
+    assert np.array_equal(seg[:, 0], np.concatenate([[0], np.cumsum(lengths)[:-1]]))
+    want = np.concatenate([l_obj[a:a + m] for a, m in zip(starts, lengths, strict=True)])
+    assert np.array_equal(obj[:used], want)
+
+
 def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     """Full frames whose lights drift (objects and camera still) take their pairs from the
     objects' candidate lists (scheduler._candidates): kept while each light stays inside
