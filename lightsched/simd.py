@@ -1133,8 +1133,8 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
             with b.if_then(b.icmp_signed(">", q, ir.Constant(q.type, 0))):
                 maps = _at_rows(b, data(7, 0, _I8), old_rows)
                 has = b.and_(first, b.icmp_signed(">=", maps, splat(0, v8i8)))
-                # Few objects hold a light with a map (the suns are not in slots): the
-                # ranking below is skipped for the others.
+                # Few objects hold a light with a map (by default the suns are not in
+                # slots): the ranking below is skipped for the others.
                 with b.if_then(b.icmp_unsigned("!=", b.bitcast(has, _I8), ir.Constant(_I8, 0)),
                                likely=False):
                     rank = splat(0, _VI64)

@@ -18,6 +18,7 @@ from test_equivalence import big_scene, configs
 
 import lightsched as ls
 from lightsched import scheduler
+from lightsched.pairs import compact_light_lists
 from lightsched.scenes import city, move_lights
 
 # Each test runs with both kinds of object grid of the fast path (conftest.py).
@@ -387,8 +388,6 @@ def test_compacted_light_lists_hold_each_lights_list_in_order():
     """pairs.compact_light_lists: the lists by light, scattered over an array with garbage
     between them (as light_lists leaves them), packed in light order from 0, each list's
     objects in their order, with the asked-for room after them."""
-    from lightsched.pairs import compact_light_lists
-
     rng = np.random.default_rng(11)
     n_l = 300
     lengths = rng.integers(0, 40, n_l)
