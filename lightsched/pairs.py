@@ -107,6 +107,10 @@ FRESH_CHUNK = 512            # objects per parallel work item of grid_pairs
 # prefetches cost +0.04 ms of a full (10k, 1k) frame (paired; bench/RESULTS.md).
 PREFETCH_OBJECTS = 1
 PREFETCH_BYTES = 1 << 18
+# list_objects asks for the seg rows and lists of the lights this far ahead: on a captured
+# lights10 (100k, 10k) input (1000 lights, 61k list entries, caches flushed between
+# calls) ~115 -> ~90 us; 4 and 16-32 lights ahead gave about the same.
+LIST_AHEAD = 8
 RUN_SPLIT = 4                # grid cells are this much finer along z (the run axis)
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 
@@ -1403,9 +1407,19 @@ def row_lengths(rows, seg_a, seg_b):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def list_objects(by_light, lights, mark):
     """Marks (True in ``mark``) the objects in the candidate lists of the light rows
-    ``lights`` (by_light = (seg [L, 2], object rows), as light_lists keeps them)."""
+    ``lights`` (by_light = (seg [L, 2], object rows), as light_lists keeps them).
+
+    Each light's seg row and the start of its list are misses (lights at random, lists
+    scattered over the heap): both are prefetched LIST_AHEAD lights ahead, the seg row
+    twice as far so that its list's start can be read. One thread: two would write the
+    same lines of ``mark``."""
     l_seg, l_obj = by_light
-    for t in range(lights.shape[0]):
+    n = lights.shape[0]
+    for t in range(n):
+        if t + 2 * LIST_AHEAD < n:
+            prefetch_row(l_seg, lights[t + 2 * LIST_AHEAD])
+        if t + LIST_AHEAD < n:
+            prefetch_row(l_obj, l_seg[lights[t + LIST_AHEAD], 0])
         j = lights[t]
         for i in range(l_seg[j, 0], l_seg[j, 0] + l_seg[j, 1]):
             mark[l_obj[i]] = True

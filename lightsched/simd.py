@@ -1165,11 +1165,11 @@ def _prefetch(builder: ir.IRBuilder, ptr: ir.Value) -> None:
 
 @intrinsic(prefer_literal=False)
 def prefetch_row(typingctx, table, row):
-    """Asks the cache for the start of ``table[row]`` (a C-order 2-D array) without waiting
-    for it: the light pass takes its lights in cell order, so each light's row of
+    """Asks the cache for the start of ``table[row]`` (a C-order 1-D or 2-D array) without
+    waiting for it: the light pass takes its lights in cell order, so each light's row of
     light_hot is a miss that stalled the walk (~9% of its samples) until fetched one light
     ahead. Out-of-range rows are allowed: a prefetch never faults."""
-    if not (isinstance(table, types.Array) and table.ndim == 2 and table.layout == "C"
+    if not (isinstance(table, types.Array) and table.ndim in (1, 2) and table.layout == "C"
             and isinstance(row, types.Integer)):
         return None
     sig = types.void(table, row)
