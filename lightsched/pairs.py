@@ -940,8 +940,13 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     heap's records from ``used`` on free for the rows' candidates plus len(dir_rows) per
     row. Writes the rows' segments (the others' are left as they are), each object's pairs
     in candidate order within the room of its chunk of rows, and returns (the end of those
-    rooms, the number of pairs written); (that end, -1) with nothing written when the
-    heap is shorter than it, so that a caller may size the heap from an estimate."""
+    rooms, the number of pairs written, the number of pairs the rows' old segments held);
+    (that end, -1, that number) with nothing written when the heap is shorter than it, so
+    that a caller may size the heap from an estimate or pack it. ``used`` = 0 means no
+    segment holds a record (a full frame's seg is new, and not read): an incremental frame
+    learns its room and the pairs it drops in the one parallel pass over its rows that
+    sizes the chunks (a serial pass over 44k of 100k rows took ~0.2 ms: those rows' seg
+    entries are cache misses)."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
@@ -959,16 +964,22 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     # lengths (16 MB of segments, read with a stride) took ~0.5 ms.
     room = np.empty(n_chunks + 1, np.int64)
     room[0] = used
+    dropped = np.zeros(n_chunks, np.int64)
     for ch in nb.prange(n_chunks):
         size = 0
+        old = 0
         for r in range(ch * OBJECT_CHUNK, min(n_rows, (ch + 1) * OBJECT_CHUNK)):
-            size += c_seg[rows[r], 1] + n_dir
+            o = rows[r]
+            size += c_seg[o, 1] + n_dir
+            if used:
+                old += o_seg[o, 1]
         room[ch + 1] = size
+        dropped[ch] = old
     for ch in range(n_chunks):
         room[ch + 1] += room[ch]
     at = room[n_chunks]
     if at > o_p.shape[0]:
-        return at, -1
+        return at, -1, dropped.sum()
     wrote = np.empty(n_chunks, np.int64)
     for ch in nb.prange(n_chunks):
         r0 = ch * OBJECT_CHUNK
@@ -1009,7 +1020,7 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
                     m += 1
             o_seg[o, 1] = m - o_seg[o, 0]
         wrote[ch] = m - room[ch]
-    return at, wrote.sum()
+    return at, wrote.sum(), dropped.sum()
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -1389,19 +1400,6 @@ def list_room(start):
 def _room_for(m):
     """The room of a candidate list of m lights: space for half as many again, and two."""
     return m + 2 + m // 2
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def row_lengths(rows, seg_a, seg_b):
-    """(The lengths seg_a[rows, 1] summed, seg_b[rows, 1] summed) in one pass: an
-    incremental frame's room for its objects' candidates and the pairs their old lists
-    held (numpy's fancy-indexed sum took ~47 us each for 44k of 100k rows)."""
-    a = 0
-    b = 0
-    for r in range(rows.shape[0]):
-        a += seg_a[rows[r], 1]
-        b += seg_b[rows[r], 1]
-    return a, b
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -80,7 +80,6 @@ from .pairs import (
     move_records,
     object_pass,
     replace_lists,
-    row_lengths,
     scan_pairs,
     spread_lists,
     start_at,
@@ -689,11 +688,11 @@ class Scheduler(SceneAPI):
             heap = self._new_heap(self._pair_room(cands, n, dir_rows.size))
             args = (self._rows(n), (c_seg, c_j), cands.recs, packed, compete, dir_rows,
                     p_params)
-            used, n_pairs = candidate_pairs(*args, (seg, *heap), 0)
+            used, n_pairs, _ = candidate_pairs(*args, (seg, *heap), 0)
             if n_pairs < 0:
                 self._spare_heap = heap
                 heap = self._new_heap(int(used))
-                used, n_pairs = candidate_pairs(*args, (seg, *heap), 0)
+                used, n_pairs, _ = candidate_pairs(*args, (seg, *heap), 0)
             used, n_pairs = int(used), int(n_pairs)
             run = self._rows(n, read_only=False)
             plan["lists"] = "every pair from the objects' candidate lists, by object row"
@@ -712,13 +711,20 @@ class Scheduler(SceneAPI):
             reach &= vis_o
             rows = np.flatnonzero(reach)
             c_seg, _, c_j, _ = cands.lists
-            need, dropped = row_lengths(rows, c_seg, c.seg)
-            seg, heap, used = _room(self._new_heap, c.seg, c.heap, c.used, c.pairs, int(need))
-            n_pairs = c.pairs - int(dropped)
+            seg, heap, used, n_pairs = c.seg, c.heap, c.used, c.pairs
             if rows.size:
-                used, wrote = candidate_pairs(rows, (c_seg, c_j), cands.recs, packed, compete,
-                                              _NO_ROWS, p_params, (seg, *heap), used)
-                used, n_pairs = int(used), n_pairs + int(wrote)
+                args = (rows, (c_seg, c_j), cands.recs, packed, compete, _NO_ROWS, p_params)
+                at, wrote, dropped = candidate_pairs(*args, (seg, *heap), used)
+                if wrote < 0:
+                    seg, heap, used = _room(self._new_heap, seg, heap, used, n_pairs,
+                                            int(at) - used)
+                    at, wrote, dropped = candidate_pairs(*args, (seg, *heap), used)
+                need = int(at) - used
+                used, n_pairs = int(at), n_pairs - int(dropped) + int(wrote)
+                # Packed now, not at the start of the next frame like this one (which would
+                # not fit, or would leave the heap mostly garbage): that frame then writes
+                # into room it knows it has, without a failed try.
+                seg, heap, used = _room(self._new_heap, seg, heap, used, n_pairs, need)
             run = np.flatnonzero(reach | c.fading | ((vis_o | c.vis_o) if cut else False))
             plan["lists"] = (f"cache kept; the lists of {rows.size} objects made again from "
                              f"their candidates; {run.size} of {int(vis_o.sum())} visible "

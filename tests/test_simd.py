@@ -586,8 +586,9 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
 def check_stream(rng, n, n_l):
     """candidate_pairs (each packing) on candidate_scene(rng, n, n_l) in float64 and
     float32 records, for every row and for some rows after a used part of the heap, ==
-    the scalar loop, object by object; it returns the end of the room and the pairs it
-    wrote, and given a heap one record short of that room, writes nothing."""
+    the scalar loop, object by object; it returns the end of the room, the pairs it wrote
+    and the pairs the rows' old segments held (none when no record was in use), and given
+    a heap one record short of that room, writes nothing."""
     for dtype in (np.float64, np.float32):
         cands, recs, lights, compete = candidate_scene(rng, n, n_l, dtype)
         seg, c_j = cands
@@ -596,20 +597,23 @@ def check_stream(rng, n, n_l):
         for which, used in ((np.arange(n), 0), (some, 5), (some[:0], 3)):
             room = used + int(seg[which, 1].sum())
             for packing, kernel in STREAMS.items():
-                out = (np.full((n, 2), -1, np.int64), np.full(room + 1, SENTINEL_P),
+                old_seg = np.stack([np.full(n, -1), rng.integers(0, 9, n)], axis=1)
+                dropped = int(old_seg[which, 1].sum()) if used else 0
+                out = (old_seg.copy(), np.full(room + 1, SENTINEL_P),
                        np.full(room + 1, SENTINEL_ROW, np.int32))
                 args = (which, cands, recs, lights, compete, np.zeros(0, np.int64), params)
                 with _Packing(packing):
                     if room > used:
                         # A heap one record short of the room: nothing written.
                         short = (out[0], out[1][:room - 1], out[2][:room - 1])
-                        assert kernel(*args, short, used) == (room, -1)
-                        assert (out[0] == -1).all() and (out[2] == SENTINEL_ROW).all()
-                    end, wrote = kernel(*args, out, used)
-                assert end == room
+                        assert kernel(*args, short, used) == (room, -1, dropped)
+                        assert (out[0] == old_seg).all() and (out[2] == SENTINEL_ROW).all()
+                    end, wrote, gone = kernel(*args, out, used)
+                assert end == room and gone == dropped
                 o_seg, o_p, o_j = out
                 assert wrote == o_seg[which, 1].sum()
-                assert (o_seg[np.setdiff1d(np.arange(n), which)] == -1).all()
+                rest = np.setdiff1d(np.arange(n), which)
+                assert (o_seg[rest] == old_seg[rest]).all()
                 assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
                 for r, o in enumerate(which):
                     want = (np.zeros(n_l), np.zeros(n_l, np.int32))
