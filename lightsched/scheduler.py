@@ -85,6 +85,7 @@ from .pairs import (
     start_at,
     visible_objects,
     visible_order,
+    widen_walkers,
 )
 from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, aligned_empty, pack_lights
 from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
@@ -1084,22 +1085,14 @@ class Scheduler(SceneAPI):
         # three columns took 0.34 ms at 100k lights, against 0.05 for 2000 rows).
         wide = self._scratch("wide", n_l * 8, np.float64)[:n_l * 8].reshape(n_l, 8)
 
+        now = self.lights.position
+        # Centred ahead of a moving light, along its last step: it crosses the widened
+        # sphere before it leaves it, ~(1 + LEAD) x as many frames.
+        positions = (now, now if last_position is None else last_position)
+
         def walk_of(mask: np.ndarray) -> tuple[np.ndarray, ...]:
-            sel = np.flatnonzero(mask)
-            wide[sel] = hot[sel]
-            wide[sel, 3] *= 1.0 + SKIN
-            wide[sel, 4] = float(0xFFFFFFFF)
-            wide[sel, 5] = sel * 32.0
-            if last_position is not None and sel.size:
-                # Centred ahead of a moving light, along its last step: it crosses the
-                # widened sphere before it leaves it, ~(1 + LEAD) x as many frames.
-                step = self.lights.position[sel] - last_position[sel]
-                length = np.sqrt((step * step).sum(axis=1))
-                going = length > 0.0
-                moving, step, length = sel[going], step[going], length[going]
-                ahead = LEAD * SKIN * hot[moving, 3] / length
-                wide[moving, :3] = hot[moving, :3] + ahead[:, None] * step
-            rows = light_order(hot, sel.astype(np.int32), grid.grid[0], grid.grid[1])
+            sel = widen_walkers(hot, mask, positions, wide, (SKIN, LEAD))
+            rows = light_order(hot, sel, grid.grid[0], grid.grid[1])
             p_params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
             if not hold:
                 return self._walk((wide, packed[1]), rows, grid, p_params, "cand")

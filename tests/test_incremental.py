@@ -18,7 +18,7 @@ from test_equivalence import big_scene, configs
 
 import lightsched as ls
 from lightsched import scheduler
-from lightsched.pairs import compact_light_lists
+from lightsched.pairs import compact_light_lists, widen_walkers
 from lightsched.scenes import city, move_lights
 
 # Each test runs with both kinds of object grid of the fast path (conftest.py).
@@ -402,6 +402,32 @@ def test_compacted_light_lists_hold_each_lights_list_in_order():
     want = np.concatenate([l_obj[a:a + m] for a, m in zip(starts, lengths, strict=True)])
     assert np.array_equal(obj[:used], want)
 
+
+
+def test_walkers_are_widened_and_led_along_their_last_step():
+    """pairs.widen_walkers: a walking light's row of the walk's table is its row of
+    light_hot with the radius x (1 + SKIN), every mask bit, the point type and, if it
+    moved, the centre LEAD x SKIN x radius ahead along its last step; a light that did not
+    move keeps its centre, and the rows of lights that do not walk are not written."""
+    skin, lead = scheduler.SKIN, scheduler.LEAD
+    hot = np.zeros((3, 8))
+    hot[:, :3] = [[1.0, 2.0, 3.0], [10.0, 0.0, 0.0], [0.0, 0.0, -4.0]]
+    hot[:, 3] = [10.0, 4.0, 2.0]
+    hot[:, 4:] = [[1.0, 8.0, 7.0, 0.5]] * 3  # mask bit 1, spot type (1 << 3), P terms
+    now = hot[:, :3].copy()
+    last = now - [[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    wide = np.full((3, 8), -7.0)
+    sel = widen_walkers(hot, np.array([True, True, False]), (now, last), wide, (skin, lead))
+    assert sel.dtype == np.int32 and sel.tolist() == [0, 1]
+    ahead = lead * skin * 10.0 / 5.0
+    assert np.allclose(wide[0, :3], [1.0 + 3.0 * ahead, 2.0 + 4.0 * ahead, 3.0], rtol=0,
+                       atol=1e-12)
+    assert wide[1, :3].tolist() == [10.0, 0.0, 0.0]
+    assert wide[:2, 3].tolist() == [10.0 * (1 + skin), 4.0 * (1 + skin)]
+    assert wide[:2, 4].tolist() == [float(0xFFFFFFFF)] * 2
+    assert wide[:2, 5].tolist() == [0.0, 32.0]
+    assert wide[:2, 6:].tolist() == [[7.0, 0.5]] * 2
+    assert (wide[2] == -7.0).all()
 
 def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     """Full frames whose lights drift (objects and camera still) take their pairs from the
