@@ -623,7 +623,7 @@ class Scheduler(SceneAPI):
                                               rec_frame, light_cells)
             plan["pairs"] += (f", walked by {walk.size} changed lights (the other pairs are "
                               f"kept); {fresh_rows.size} moved or newly visible objects get "
-                              f"new pairs {how} {int(compete.sum())} lights; "
+                              f"new pairs {how} {np.count_nonzero(compete)} lights; "
                               f"{left_rows.size} objects left the view")
             if lists_path and cands is None:
                 cands, walk, _ = self._candidates(None, packed, compete, is_dir, grid, False,
@@ -728,14 +728,14 @@ class Scheduler(SceneAPI):
                 seg, heap, used = _room(self._new_heap, seg, heap, used, n_pairs, need)
             run = np.flatnonzero(reach | c.fading | ((vis_o | c.vis_o) if cut else False))
             plan["lists"] = (f"cache kept; the lists of {rows.size} objects made again from "
-                             f"their candidates; {run.size} of {int(vis_o.sum())} visible "
+                             f"their candidates; {run.size} of {np.count_nonzero(vis_o)} visible "
                              "objects recomputed (in reach of changed lights or of lights "
                              "whose shadow map changed, fading slots"
                              + (", a cut" if cut else "") + ")")
         else:
             seg, heap, used, run = self._patch(c, walked, live, shadow_of_row, fresh, fresh_obj,
                                                fresh_rows, left_rows, cut, vis_o)
-            plan["lists"] = (f"cache kept; {run.size} of {int(vis_o.sum())} visible objects "
+            plan["lists"] = (f"cache kept; {run.size} of {np.count_nonzero(vis_o)} visible objects "
                              f"recomputed (pairs of changed lights, moved or newly visible "
                              f"objects, shadow-map changes, fading slots"
                              + (", a cut" if cut else "") + ")")
@@ -812,7 +812,7 @@ class Scheduler(SceneAPI):
             why = [f"{lrows.size} lights and {orows.size} objects changed",
                    "cameras " + ("unchanged" if same_cams else "moved")]
             if c.fading.any():
-                why.append(f"{int(c.fading.sum())} objects fading")
+                why.append(f"{np.count_nonzero(c.fading)} objects fading")
             if not c.shadows_settled:
                 why.append("the shadowed set changed last frame")
             if cut:
@@ -827,7 +827,7 @@ class Scheduler(SceneAPI):
             f"beyond {REANCHOR:g} m; float64 arithmetic)"
             if fast else " (exact float64)") + packing
         plan["fade"] = "fused with selection in the object pass"
-        plan["shadows"] = (f"{shadow_rows.size} of {int(candidate.sum())} candidates shadowed "
+        plan["shadows"] = (f"{shadow_rows.size} of {np.count_nonzero(candidate)} candidates shadowed "
                            "(ranking, tiers, slot_shadow)"
                            if candidate.any() else "skipped: no visible shadowed light "
                            "affects a visible object")
@@ -1357,7 +1357,7 @@ def _grid_shape(n_sel: int, box: np.ndarray, packed: tuple[np.ndarray, np.ndarra
     if point_rows.size * n_sel <= BRUTE_FORCE_PAIRS:
         # One cell holding every selected object: each light tests them all.
         g_f, dims = grid_shape(box[:3], box[3:], 2.0 * max(float(np.max(box[3:] - box[:3])), 1.0))
-        return g_f, dims, f"brute force ({int(compete.sum())} lights x {n_sel} objects)"
+        return g_f, dims, f"brute force ({np.count_nonzero(compete)} lights x {n_sel} objects)"
     radii = packed[0][point_rows, 3]
     median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
     g_f, dims = grid_shape(box[:3], box[3:], CELL_PER_RADIUS * median)
