@@ -735,9 +735,9 @@ class Scheduler(SceneAPI):
         else:
             seg, heap, used, run = self._patch(c, walked, live, shadow_of_row, fresh, fresh_obj,
                                                fresh_rows, left_rows, cut, vis_o)
-            plan["lists"] = (f"cache kept; {run.size} of {np.count_nonzero(vis_o)} visible objects "
-                             f"recomputed (pairs of changed lights, moved or newly visible "
-                             f"objects, shadow-map changes, fading slots"
+            plan["lists"] = (f"cache kept; {run.size} of {np.count_nonzero(vis_o)} visible "
+                             f"objects recomputed (pairs of changed lights, moved or newly "
+                             f"visible objects, shadow-map changes, fading slots"
                              + (", a cut" if cut else "") + ")")
         t = _lap(seconds, "lists", t)
 
@@ -827,8 +827,8 @@ class Scheduler(SceneAPI):
             f"beyond {REANCHOR:g} m; float64 arithmetic)"
             if fast else " (exact float64)") + packing
         plan["fade"] = "fused with selection in the object pass"
-        plan["shadows"] = (f"{shadow_rows.size} of {np.count_nonzero(candidate)} candidates shadowed "
-                           "(ranking, tiers, slot_shadow)"
+        plan["shadows"] = (f"{shadow_rows.size} of {np.count_nonzero(candidate)} candidates "
+                           "shadowed (ranking, tiers, slot_shadow)"
                            if candidate.any() else "skipped: no visible shadowed light "
                            "affects a visible object")
         t = _lap(seconds, "output", t)

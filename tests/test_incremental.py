@@ -403,7 +403,6 @@ def test_compacted_light_lists_hold_each_lights_list_in_order():
     assert np.array_equal(obj[:used], want)
 
 
-
 def test_walkers_are_widened_and_led_along_their_last_step():
     """pairs.widen_walkers: a walking light's row of the walk's table is its row of
     light_hot with the radius x (1 + SKIN), every mask bit, the point type and, if it
@@ -428,6 +427,7 @@ def test_walkers_are_widened_and_led_along_their_last_step():
     assert wide[:2, 5].tolist() == [0.0, 32.0]
     assert wide[:2, 6:].tolist() == [[7.0, 0.5]] * 2
     assert (wide[2] == -7.0).all()
+
 
 def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     """Full frames whose lights drift (objects and camera still) take their pairs from the
