@@ -42,17 +42,36 @@ def aligned_empty(shape: int | tuple[int, ...], dtype: object = np.float64) -> n
     return buf[at:at + size].view(dt).reshape(shape)
 
 
+# The parts of a packed row, each written from its own fields (``pack_parts``): an update
+# of some fields rewrites only their parts, and a row's light_f line not at all when none of
+# its parts changed (moving lights: the hot line only).
+PACK_POSITION = 1  # light_hot 0-2: position - origin
+PACK_SCALARS = 2  # light_hot 3-7: radius, mask, row and type, intensity, p_user
+PACK_AXIS = 4  # light_f 0-2
+PACK_CONE = 8  # light_f 3-5: the spot cone's two cosines and sine
+PACK_ID = 16  # light_f 6
+PACK_CAMERA = 32  # light_f 7: the thesis camera term
+PACK_ALL = 63
+_FIELD_PARTS = {"type": PACK_SCALARS | PACK_CONE | PACK_CAMERA, "position": PACK_POSITION,
+                "radius": PACK_SCALARS, "direction": PACK_AXIS, "outer_angle": PACK_CONE,
+                "inner_angle": PACK_CONE, "intensity": PACK_SCALARS,
+                "priority": PACK_SCALARS, "mask": PACK_SCALARS, "id": PACK_ID}
+
+
+def pack_parts(fields: list[str], camera_term: bool) -> int:
+    """The parts of a packed row that depend on the light ``fields`` (names of the light
+    store's; "shadows" is not packed). The thesis camera term also reads the position and
+    the radius."""
+    parts = 0
+    for f in fields:
+        parts |= _FIELD_PARTS.get(f, 0)
+        if camera_term and f in ("position", "radius"):
+            parts |= PACK_CAMERA
+    return parts
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
-    typ, position, radius, direction, outer, inner, intensity, prio, mask, ids = store
-    for k in range(3):
-        hot[j, k] = position[j, k] - origin[k]
-        lf[j, k] = direction[j, k]
-    hot[j, 3] = radius[j]
-    hot[j, 4] = mask[j]
-    hot[j, 5] = j * 32 + typ[j] * 8
-    hot[j, 6] = intensity[j]
-    hot[j, 7] = prio[j]
+def _pack_cone(j, lf, typ, outer, inner):
     if typ[j] == SPOT:
         lf[j, 3] = math.cos(outer[j])
         lf[j, 4] = math.sin(outer[j])
@@ -65,43 +84,65 @@ def _pack_row(j, hot, lf, store, cams, thesis_w, origin):
         lf[j, 3] = 1.0
         lf[j, 4] = 0.0
         lf[j, 5] = np.nan
-    lf[j, 6] = ids[j]
-    if typ[j] != DIRECTIONAL:
-        cam_pos, cam_basis, cam_tan, cam_focus = cams
-        best = -np.inf
-        for c in range(cam_pos.shape[0]):
-            a = thesis_camera_term(position[j], radius[j], cam_pos[c], cam_basis[c],
-                                   cam_tan[c], cam_focus[c], thesis_w[0], thesis_w[1],
-                                   thesis_w[2])
-            if a > best:
-                best = a
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intensity, prio,
+              mask, ids, cam_pos, cam_basis, cam_tan, cam_focus, thesis_w, origin, parts):
+    # The arrays come one by one, not as _pack's tuples: a tuple unpacked once a row kept
+    # its reference counting in the loop (20 atomic operations a light, ~12 ns of ~20).
+    if parts & PACK_POSITION:
+        for k in range(3):
+            hot[j, k] = position[j, k] - origin[k]
+    if parts & PACK_SCALARS:
+        hot[j, 3] = radius[j]
+        hot[j, 4] = mask[j]
+        hot[j, 5] = j * 32 + typ[j] * 8
+        hot[j, 6] = intensity[j]
+        hot[j, 7] = prio[j]
+    if parts & PACK_AXIS:
+        for k in range(3):
+            lf[j, k] = direction[j, k]
+    if parts & PACK_CONE:
+        _pack_cone(j, lf, typ, outer, inner)
+    if parts & PACK_ID:
+        lf[j, 6] = ids[j]
+    if parts & PACK_CAMERA:
+        best = 0.0
+        if typ[j] != DIRECTIONAL:
+            best = -np.inf
+            for c in range(cam_pos.shape[0]):
+                a = thesis_camera_term(position[j], radius[j], cam_pos[c], cam_basis[c],
+                                       cam_tan[c], cam_focus[c], thesis_w[0], thesis_w[1],
+                                       thesis_w[2])
+                if a > best:
+                    best = a
         lf[j, 7] = best
-    else:
-        lf[j, 7] = 0.0
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def _pack(rows, store, cams, thesis_w, origin, out):
+def _pack(rows, store, cams, thesis_w, origin, out, parts):
     """store = the light store's (type, position, radius, direction, outer_angle,
     inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,
     tan_xy, focus), zero cameras for the contribution model (column 7 stays -inf);
-    out = (hot, lf), [L, 8] each: every element of the light rows ``rows`` written (every
-    row when it is None)."""
+    out = (hot, lf), [L, 8] each: the ``parts`` (PACK_* bits) of the light rows ``rows``
+    written (of every row when it is None)."""
     hot, lf = out
-    if rows is None:
-        n = store[0].shape[0]
-        if n < SERIAL_LIGHTS:
-            for j in range(n):
-                _pack_row(j, hot, lf, store, cams, thesis_w, origin)
-        else:
-            for j in nb.prange(n):
-                _pack_row(j, hot, lf, store, cams, thesis_w, origin)
-    elif rows.shape[0] < SERIAL_LIGHTS:
-        for t in range(rows.shape[0]):
-            _pack_row(rows[t], hot, lf, store, cams, thesis_w, origin)
+    typ, position, radius, direction, outer, inner, intensity, prio, mask, ids = store
+    cam_pos, cam_basis, cam_tan, cam_focus = cams
+    n = typ.shape[0] if rows is None else rows.shape[0]
+    if n < SERIAL_LIGHTS:
+        for t in range(n):
+            j = np.int64(t) if rows is None else np.int64(rows[t])
+            _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intensity,
+                      prio, mask, ids, cam_pos, cam_basis, cam_tan, cam_focus, thesis_w,
+                      origin, parts)
     else:
-        for t in nb.prange(rows.shape[0]):
-            _pack_row(rows[t], hot, lf, store, cams, thesis_w, origin)
+        for t in nb.prange(n):
+            j = np.int64(t) if rows is None else np.int64(rows[t])
+            _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intensity,
+                      prio, mask, ids, cam_pos, cam_basis, cam_tan, cam_focus, thesis_w,
+                      origin, parts)
     return hot, lf
 
 
@@ -113,26 +154,27 @@ def light_columns(lights: LightStore) -> tuple[np.ndarray, ...]:
 
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
                 c1: float, camera_term: bool = True, origin: np.ndarray | None = None,
-                into: tuple[tuple[np.ndarray, np.ndarray], np.ndarray] | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+                into: tuple[tuple[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                parts: int = PACK_ALL) -> tuple[np.ndarray, np.ndarray]:
     """Packs the light store into the row layout above (one cache-friendly row per light).
     Without ``camera_term`` (the contribution model, which does not read it) light_f
     column 7 is -inf: the eccentricity is the packing's costliest part. Positions are
     relative to ``origin`` (the object records' frame; 0 in exact precision, where x - 0
-    is x). ``into`` = (last frame's packed lights, the light rows that changed): only those
-    rows are packed again, in place (the other rows, the cameras where they count and the
-    origin as they were: an incremental frame)."""
+    is x). ``into`` = (last frame's packed lights of the same light rows, the rows that
+    changed or None for every row): only those rows are packed again, in place, and of
+    them only the ``parts`` (``pack_parts``) that changed; the rest (other rows and parts,
+    the cameras where they count, the origin) as they were."""
     cams = slice(None) if camera_term else slice(0)
     cam_columns = (frames.position[cams], frames.basis[cams], frames.tan_xy[cams],
                    frames.focus[cams])
     if into is None:
         # One buffer for both: rows of 64 bytes, so light_f starts on a cache line too.
         out = aligned_empty((2, len(lights.id), 8))
-        packed, rows = (out[0], out[1]), None
+        packed, rows, parts = (out[0], out[1]), None, PACK_ALL
     else:
         packed, rows = into
     return _pack(rows, light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
-                 np.zeros(3) if origin is None else origin, packed)
+                 np.zeros(3) if origin is None else origin, packed, np.int64(parts))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -87,7 +87,16 @@ from .pairs import (
     visible_order,
     widen_walkers,
 )
-from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, aligned_empty, pack_lights
+from .priority import (
+    MODEL_CONTRIBUTION,
+    MODEL_THESIS,
+    PACK_ALL,
+    PACK_CAMERA,
+    PACK_POSITION,
+    aligned_empty,
+    pack_lights,
+    pack_parts,
+)
 from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
 from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_casters
 
@@ -464,18 +473,38 @@ class Scheduler(SceneAPI):
                                          frames.plane_p)
         t = _lap(seconds, "visibility", t)
 
-        packing = "; every light packed"
-        if full or (not same_cams and cfg.model != "contribution"):
-            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
-                                 cfg.model == "thesis", rec_frame[0])
+        # The light rows as last frame's (lrows is None when they were renumbered): they
+        # are packed again in last frame's arrays, and only the parts of a row that read a
+        # field whose array changed (moving lights: the position only, one line a light;
+        # a whole row at (100k, 10k) cost 0.2 ms, mostly its two lines' traffic).
+        thesis = cfg.model == "thesis"
+        parts, changed, into = PACK_ALL, [], None
+        if c is not None and lrows is not None:
+            changed = [f for f in LIGHT_FIELDS if c.lights[f] is not getattr(lights, f)]
+            parts = pack_parts(changed, thesis)
+            if thesis and not same_cams:
+                parts |= PACK_CAMERA
+                changed.append("cameras")
+            if not np.array_equal(origin, c.origin):
+                parts |= PACK_POSITION
+                changed.append("origin")
+            into = c.packed
+        only = f" ({', '.join(changed)} only)" if parts != PACK_ALL else ""
+        if parts == 0:
+            packed, packing = c.packed, "; the packed lights kept"
+        elif full or (thesis and not same_cams):
+            packing = "; every light packed" + ("" if into is None else " again" + only)
+            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1, thesis,
+                                 rec_frame[0], into=None if into is None else (into, None),
+                                 parts=parts)
         elif lrows.size:
-            packing = f"; the {lrows.size} changed lights packed again, the others kept"
+            packing = f"; the {lrows.size} changed lights packed again{only}, the others kept"
             # Only the changed rows, in last frame's arrays (this frame's to change): at
             # (100k, 10k) the stage 0.22 -> 0.09 ms with 1000 lights moving, 0.26 -> 0.05
             # with 100 (interleaved frames, medians of 100).
-            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1,
-                                 cfg.model == "thesis", rec_frame[0],
-                                 into=(c.packed, lrows.astype(np.int64)))
+            packed = pack_lights(lights, frames, cfg.w_ecc, cfg.w_dist, cfg.c1, thesis,
+                                 rec_frame[0], into=(into, lrows.astype(np.int64)),
+                                 parts=parts)
         else:
             packed, packing = c.packed, "; the packed lights kept"
         is_dir = lights.type == DIRECTIONAL

@@ -419,10 +419,20 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     oracle tests' scenes), from it in parallel: a prefix of the lights gets the same rows
     from the serial loop as from the parallel one. The packing of some rows in place (an
     incremental frame's changed lights) writes those rows as a whole packing does, and no
-    other."""
+    other; the packing of one part of them (PACK_*) those columns and no other."""
     from lightsched.frustum import SERIAL_LIGHTS, lights_visible
     from lightsched.pairs import light_bounds
-    from lightsched.priority import _pack, light_columns
+    from lightsched.priority import (
+        PACK_ALL,
+        PACK_AXIS,
+        PACK_CAMERA,
+        PACK_CONE,
+        PACK_ID,
+        PACK_POSITION,
+        PACK_SCALARS,
+        _pack,
+        light_columns,
+    )
 
     scene = city(3000, 3 * SERIAL_LIGHTS, seed=4, shadow_fraction=0.05)
     s = ls.Scheduler(ls.Config(max_lights=8, model="thesis"))
@@ -435,12 +445,12 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
 
     UNSET = -7.25e300
 
-    def pack(m: int, rows: np.ndarray | None = None, out: Any = None
-             ) -> tuple[np.ndarray, np.ndarray]:
+    def pack(m: int, rows: np.ndarray | None = None, out: Any = None,
+             parts: int = PACK_ALL) -> tuple[np.ndarray, np.ndarray]:
         store = tuple(a[:m] for a in light_columns(lights))
         return _pack(rows, store, (f.position, f.basis, f.tan_xy, f.focus),
                      np.array([s.config.w_ecc, s.config.w_dist, s.config.c1]), np.zeros(3),
-                     out or (np.full((m, 8), UNSET), np.full((m, 8), UNSET)))
+                     out or (np.full((m, 8), UNSET), np.full((m, 8), UNSET)), parts)
 
     for a, b in zip(pack(n), pack(few), strict=True):
         assert np.array_equal(a[:few], b, equal_nan=True)
@@ -455,6 +465,22 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
             assert np.array_equal(a[rows], b[rows], equal_nan=True)
             others = np.setdiff1d(np.arange(n), rows)
             assert (a[others] == UNSET).all()
+    # One part of the rows (the columns that read the fields an update changed): those
+    # columns as a whole packing has them, every other element as it was.
+    columns = {PACK_POSITION: (0, [0, 1, 2]), PACK_SCALARS: (0, [3, 4, 5, 6, 7]),
+               PACK_AXIS: (1, [0, 1, 2]), PACK_CONE: (1, [3, 4, 5]), PACK_ID: (1, [6]),
+               PACK_CAMERA: (1, [7])}
+    assert sum(columns) == PACK_ALL
+    for part, (side, cols) in columns.items():
+        for rows in (None, np.arange(0, n, 3)):
+            out = tuple(np.full((n, 8), UNSET) for _ in range(2))
+            pack(n, rows, out, part)
+            at = np.arange(n) if rows is None else rows
+            written = np.zeros((2, n, 8), np.bool_)
+            written[side, at[:, None], cols] = True
+            for q in range(2):
+                assert np.array_equal(out[q][written[q]], whole[q][written[q]], equal_nan=True)
+                assert (out[q][~written[q]] == UNSET).all()
     vis = [lights_visible(lights.type[:m], lights.position[:m], lights.radius[:m], f.plane_n,
                           f.plane_p) for m in (n, few)]
     assert np.array_equal(vis[0][:few], vis[1]) and vis[1].any() and not vis[1].all()

@@ -90,7 +90,8 @@ def test_fading_slots_are_stepped_when_nothing_moved():
 
 
 @pytest.mark.parametrize("field", ["position", "intensity", "mask", "type", "radius",
-                                   "priority", "shadows", "direction"])
+                                   "priority", "shadows", "direction", "outer_angle",
+                                   "inner_angle"])
 def test_changed_lights_recompute_only_the_objects_they_touch(field):
     cfg = ls.Config(max_lights=3, directional_in_slots=field == "type",
                     unshadowed="skip" if field == "shadows" else "light", shadow_budget=3)
@@ -106,16 +107,22 @@ def test_changed_lights_recompute_only_the_objects_they_touch(field):
                 "radius": rng.uniform(0.5, 25.0, 12),
                 "priority": rng.choice([0.0, 7.0], 12),
                 "shadows": rng.uniform(size=12) < 0.5,
-                "direction": rng.normal(size=(12, 3))}[field]
+                "direction": rng.normal(size=(12, 3)),
+                # Within the spot's other angle (the step profile where they meet).
+                "outer_angle": lights["inner_angle"][rows]
+                + rng.choice([0.0, 0.5, 0.999], 12) * (np.pi / 2 - lights["inner_angle"][rows]),
+                "inner_angle": lights["outer_angle"][rows] * rng.choice([0.0, 0.5, 1.0], 12),
+                }[field]
         lights[field][rows] = vals
         t.update_lights(id=lights["id"][rows], **{field: vals})
         f, _ = t.frame(cams, dt=0.05)
         assert _plan(f).startswith("incremental"), f.stats["plan"]
         assert f.stats["counts"]["changed_lights"] <= 12
         changed = f.stats["counts"]["changed_lights"]
+        # Only the parts of the packed rows that read the field are packed again.
         assert f.stats["plan"]["priority"].endswith(
-            f"; the {changed} changed lights packed again, the others kept"
-            if changed else "; the packed lights kept"), f.stats["plan"]
+            f"; the {changed} changed lights packed again ({field} only), the others kept"
+            if changed and field != "shadows" else "; the packed lights kept"), f.stats["plan"]
         assert f.stats["counts"]["recomputed_objects"] < f.stats["counts"]["visible_objects"] \
             or i == 0 and field == "type", f.stats["counts"]
 
