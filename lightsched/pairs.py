@@ -397,12 +397,11 @@ def _reach2(hot, j):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _column_run(hot, j, c, x, y, dxx, rr, grid):
+def _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext):
     """Positions [v0, v1) of the objects centred in the column (x, y) of light j's cell
     range c that its widened sphere (squared radius rr; dxx its x slab distance) can reach:
     the cube is cut to the sphere column by column, empty when the sphere misses the
     column's slab, else trimmed to its chord along z."""
-    g_f, dims, cell_start, ext, _ = grid
     dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
     if dd > rr:
         return 0, 0
@@ -416,12 +415,11 @@ def _column_run(hot, j, c, x, y, dxx, rr, grid):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _light_bound(hot, j, grid, n_vis):
-    g_f, dims, cell_start, ext, big_pos = grid
+def _light_bound(hot, j, g_f, dims, cell_start, ext, n_big, n_vis):
     if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
         return n_vis
     c = _light_cells(hot, j, g_f, dims, ext)
-    total = big_pos.shape[0]
+    total = n_big
     # The whole cube, not the sphere cut: a looser bound is cheaper to count.
     for x in range(c[0], c[3] + 1):
         for y in range(c[1], c[4] + 1):
@@ -436,13 +434,16 @@ def light_bounds(hot, rows, grid, n_vis):
     of an upper bound of the pairs it can emit (objects centred in the cells of its
     widened cube plus the big objects; every visible object for a directional light).
     Parallel from SERIAL_LIGHTS lights."""
+    g_f, dims, cell_start, ext, big_pos = grid
+    n_big = big_pos.shape[0]
     out = np.zeros(rows.shape[0], np.int64)
     if rows.shape[0] < SERIAL_LIGHTS:
         for t in range(rows.shape[0]):
-            out[t] = _light_bound(hot, rows[t], grid, n_vis)
+            out[t] = _light_bound(hot, rows[t], g_f, dims, cell_start, ext, n_big, n_vis)
     else:
+        # (The grid unpacked out of the loop, as in light_pass.)
         for t in nb.prange(rows.shape[0]):
-            out[t] = _light_bound(hot, rows[t], grid, n_vis)
+            out[t] = _light_bound(hot, rows[t], g_f, dims, cell_start, ext, n_big, n_vis)
     offsets = np.zeros(rows.shape[0] + 1, np.int64)
     for t in range(rows.shape[0]):
         offsets[t + 1] = offsets[t] + out[t]
@@ -497,85 +498,78 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     model = int(params[0])
     w_obj = params[1]
     w_int = params[2]
+    # Unpacked once: a tuple of arrays unpacked in the loop (once a light, in a helper)
+    # keeps its reference counting there, atomic operations on counts both threads share.
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
+    vis_box, vis_bits, vis_rows = vis
+    n_vis = vis_box.shape[0]
     count = np.zeros(rows.shape[0], np.int64)
     n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
     for ch in nb.prange(n_chunks):
         keep = (np.empty(256, np.int32), np.empty(256))
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
             if t + 1 < rows.shape[0]:
-                prefetch_row(lights[0], rows[t + 1])
-            keep = _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count,
-                              keep, model, w_obj, w_int)
+                prefetch_row(hot, rows[t + 1])
+            # Light rows[t]'s pairs into its segment of pair_obj / pair_p; ``keep`` is the
+            # filter scratch of _run_pairs (regrown there when short).
+            j = rows[t]
+            lm = np.int64(hot[j, 4])
+            typ = (np.int64(hot[j, 5]) >> 3) & 3
+            n = offsets[t]
+            if typ == DIRECTIONAL:
+                p = hot[j, 6] + hot[j, 7]
+                for v in range(n_vis):
+                    if np.int64(vis_bits[v, 6]) & lm != 0:
+                        pair_obj[n] = vis_rows[v]
+                        pair_p[n] = p
+                        n += 1
+                count[t] = n - offsets[t]
+                continue
+            c = _light_cells(hot, j, g_f, dims, ext)
+            rr = _reach2(hot, j)
+            # The walk of _column_run written out: through the helper this loop ran ~10%
+            # slower (measured at (100k, 10k)), and it is the hottest loop of a frame.
+            for x in range(c[0], c[3] + 1):
+                dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+                if dxx > rr:
+                    continue
+                for y in range(c[1], c[4] + 1):
+                    dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
+                    if dd > rr:
+                        continue
+                    zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
+                    z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
+                    z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
+                    if z1 < z0:
+                        continue
+                    base = (x * dims[1] + y) * dims[2]
+                    # The objects centred in a column of cells are one run of positions.
+                    n, keep = _run_pairs(cell_start[base + z0], cell_start[base + z1 + 1], hot,
+                                         lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_obj,
+                                         pair_p, n, keep, model, w_obj, w_int)
+            if vis_box.itemsize == 8:
+                # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
+                if typ == POINT and model == MODEL_CONTRIBUTION:
+                    point_priority(vis_box, vis_rows, _point_light(hot, j), pair_obj, pair_p,
+                                   offsets[t], n)
+                elif typ == SPOT and model == MODEL_CONTRIBUTION:
+                    spot = (lf[j, 0], lf[j, 1], lf[j, 2], lf[j, 3], lf[j, 4], lf[j, 5])
+                    n = spot_priority(vis_box, vis_rows, _point_light(hot, j), spot, pair_obj,
+                                      pair_p, offsets[t], n)
+                else:
+                    n = _finish_hits(hot, lf, j, typ, offsets[t], n, vis_box, vis_rows,
+                                     pair_obj, pair_p, model, w_obj, w_int)
+            r = hot[j, 3]
+            rr_exact = r * r
+            for b in range(big_pos.shape[0]):
+                v = big_pos[b]
+                d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
+                if d2 <= rr_exact:
+                    n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_bits, vis_rows,
+                                    pair_obj, pair_p, n, model, w_obj, w_int)
+            count[t] = n - offsets[t]
     return count
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _one_light(t, lights, rows, grid, vis, offsets, pair_obj, pair_p, count, keep, model,
-               w_obj, w_int):
-    """Light rows[t]'s pairs into its segment of pair_obj / pair_p (see light_pass);
-    returns the (possibly regrown) filter scratch: positions that pass the range test and
-    their d2."""
-    hot, lf = lights
-    g_f, dims, cell_start, ext, big_pos = grid
-    vis_box, vis_bits, vis_rows = vis
-    n_vis = vis_box.shape[0]
-    j = rows[t]
-    lm = np.int64(hot[j, 4])
-    typ = (np.int64(hot[j, 5]) >> 3) & 3
-    n = offsets[t]
-    if typ == DIRECTIONAL:
-        p = hot[j, 6] + hot[j, 7]
-        for v in range(n_vis):
-            if np.int64(vis_bits[v, 6]) & lm != 0:
-                pair_obj[n] = vis_rows[v]
-                pair_p[n] = p
-                n += 1
-        count[t] = n - offsets[t]
-        return keep
-    c = _light_cells(hot, j, g_f, dims, ext)
-    rr = _reach2(hot, j)
-    # The walk of _column_run written out: through the helper this loop ran ~10% slower
-    # (measured at (100k, 10k)), and it is the hottest loop of a frame.
-    for x in range(c[0], c[3] + 1):
-        dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-        if dxx > rr:
-            continue
-        for y in range(c[1], c[4] + 1):
-            dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
-            if dd > rr:
-                continue
-            zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
-            z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
-            z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
-            if z1 < z0:
-                continue
-            base = (x * dims[1] + y) * dims[2]
-            # The objects centred in a column of cells are one run of positions.
-            n, keep = _run_pairs(cell_start[base + z0], cell_start[base + z1 + 1], hot, lf, j,
-                                 lm, typ, vis_box, vis_bits, vis_rows, pair_obj, pair_p, n,
-                                 keep, model, w_obj, w_int)
-    if vis_box.itemsize == 8:
-        # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
-        if typ == POINT and model == MODEL_CONTRIBUTION:
-            point_priority(vis_box, vis_rows, _point_light(hot, j), pair_obj, pair_p,
-                           offsets[t], n)
-        elif typ == SPOT and model == MODEL_CONTRIBUTION:
-            spot = (lf[j, 0], lf[j, 1], lf[j, 2], lf[j, 3], lf[j, 4], lf[j, 5])
-            n = spot_priority(vis_box, vis_rows, _point_light(hot, j), spot, pair_obj,
-                              pair_p, offsets[t], n)
-        else:
-            n = _finish_hits(hot, lf, j, typ, offsets[t], n, vis_box, vis_rows, pair_obj,
-                             pair_p, model, w_obj, w_int)
-    r = hot[j, 3]
-    rr_exact = r * r
-    for b in range(big_pos.shape[0]):
-        v = big_pos[b]
-        d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
-        if d2 <= rr_exact:
-            n = _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_bits, vis_rows, pair_obj,
-                            pair_p, n, model, w_obj, w_int)
-    count[t] = n - offsets[t]
-    return keep
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -665,7 +659,7 @@ def affects_any(lights, rows, grid, vis):
             for y in range(c[1], c[4] + 1):
                 if hit:
                     break
-                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
+                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
                 for v in range(v0, v1):
                     if _affects(hot, lf, j, lm, typ, v, vis_box, vis_bits):
                         hit = True
@@ -717,20 +711,24 @@ def _record_e2(box, v):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _caster(hot, lf, j, typ, t, recs, casts, vols, v, out_rows, out_mask, n):
-    """Appends (object row, caster mask) of grid position v for shadowed light row j at n
-    when it is a caster: casts_shadows, mask, d2 <= r*r, then shadows.caster_bits.
-    Returns the new n. casts = (casts_shadows, mask) of the store: the mask in a grid of
-    every object's records is 0 for the invisible ones (they pair with no light), but
-    invisible objects cast."""
-    box, box_rows, lo, hi, w_lo, w_hi = recs
+def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, vn, vq, vm,
+            out_rows, out_mask, n):
+    """Appends (object row, caster mask) of grid position v for shadowed light ``light`` =
+    (row j, type, index t of its culling volumes) at n when it is a caster: casts_shadows,
+    mask, d2 <= r*r, then shadows.caster_bits. Returns the new n. box, box_rows, lo, hi:
+    the grid's records, their object rows and lo / hi views; casts, omask, w_lo, w_hi: the
+    store's casts_shadows, mask, bounds_min, bounds_max (the mask in a grid of every
+    object's records is 0 for the invisible ones, which pair with no light, but invisible
+    objects cast); vn, vq, vm: the culling volumes. The arrays come one by one: a tuple of
+    them unpacked once an object kept its reference counting in the walk."""
+    j, typ, t = light
     o = box_rows[v]
-    if not casts[0][o] or np.int64(casts[1][o]) & np.int64(hot[j, 4]) == 0:
+    if not casts[o] or np.int64(omask[o]) & np.int64(hot[j, 4]) == 0:
         return n
     r = hot[j, 3]
     if not box_d2(box, v, hot[j, 0], hot[j, 1], hot[j, 2]) <= r * r:
         return n
-    bits = caster_bits(hot, lf, j, typ, vols, t, (lo, hi, v), (w_lo, w_hi, o))
+    bits = caster_bits(hot, lf, j, typ, t, vn, vq, vm, lo, hi, v, w_lo, w_hi, o)
     if bits != 0:
         out_rows[n] = o
         out_mask[n] = bits
@@ -750,47 +748,41 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
     a light's rows come ascending (sorted here, per light: the frame keeps them as they
     are)."""
+    # Every tuple unpacked here: arrays taken out of a tuple inside the parallel loop were
+    # written to copies (numba 0.68 parfors), and the stores were lost.
+    hot, lf = lights
+    g_f, dims, cell_start, ext, big_pos = grid
     box, box_rows = recs[0], recs[2]
-    casts = (objects[0], objects[1])
-    # Flat: numba's parallel loops take no tuple nested in a tuple of arrays.
-    walk = (box, box_rows, box[:, 0:3], box[:, 3:6], objects[2], objects[3])
-    # Unpacked here: arrays taken out of a tuple inside the parallel loop were written to
-    # copies (numba 0.68 parfors), and the stores were lost.
+    lo, hi = box[:, 0:3], box[:, 3:6]
+    casts, omask, w_lo, w_hi = objects
+    vn, vq, vm = vols[0], vols[1], vols[2]
     out_rows, out_mask = out
     count = np.zeros(rows.shape[0], np.int64)
     for t in nb.prange(rows.shape[0]):
-        count[t] = _light_casters(t, lights, rows, grid, walk, casts, vols, offsets, out_rows,
-                                  out_mask)
+        j = rows[t]
+        light = (j, (np.int64(hot[j, 5]) >> 3) & 3, np.int64(t))
+        n = offsets[t]
+        c = _light_cells(hot, j, g_f, dims, ext)
+        rr = _reach2(hot, j)
+        for x in range(c[0], c[3] + 1):
+            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+            if dxx > rr:
+                continue
+            for y in range(c[1], c[4] + 1):
+                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
+                for v in range(v0, v1):
+                    n = _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo,
+                                w_hi, vn, vq, vm, out_rows, out_mask, n)
+        for b in range(big_pos.shape[0]):
+            n = _caster(hot, lf, light, big_pos[b], box, box_rows, casts, omask, lo, hi, w_lo,
+                        w_hi, vn, vq, vm, out_rows, out_mask, n)
+        a = offsets[t]
+        order = np.argsort(out_rows[a:n]) + a
+        sorted_rows, sorted_mask = out_rows[order], out_mask[order]
+        out_rows[a:n] = sorted_rows
+        out_mask[a:n] = sorted_mask
+        count[t] = n - a
     return count
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _light_casters(t, lights, rows, grid, walk, casts, vols, offsets, out_rows, out_mask):
-    """grid_casters for light rows[t]: its casters written from offsets[t], sorted by
-    object row; returns how many."""
-    hot, lf = lights
-    g_f, dims, cell_start, ext, big_pos = grid
-    j = rows[t]
-    typ = (np.int64(hot[j, 5]) >> 3) & 3
-    n = offsets[t]
-    c = _light_cells(hot, j, g_f, dims, ext)
-    rr = _reach2(hot, j)
-    for x in range(c[0], c[3] + 1):
-        dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-        if dxx > rr:
-            continue
-        for y in range(c[1], c[4] + 1):
-            v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, grid)
-            for v in range(v0, v1):
-                n = _caster(hot, lf, j, typ, t, walk, casts, vols, v, out_rows, out_mask, n)
-    for b in range(big_pos.shape[0]):
-        n = _caster(hot, lf, j, typ, t, walk, casts, vols, big_pos[b], out_rows, out_mask, n)
-    a = offsets[t]
-    order = np.argsort(out_rows[a:n]) + a
-    sorted_rows, sorted_mask = out_rows[order], out_mask[order]
-    out_rows[a:n] = sorted_rows
-    out_mask[a:n] = sorted_mask
-    return n - a
 
 
 @nb.njit(cache=True, nogil=True, parallel=True, error_model="numpy")

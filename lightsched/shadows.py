@@ -332,9 +332,9 @@ def _plane_ok(vn, vq, t, b, i, lo, hi, v):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def box_in_volume(vols, t, b, lo, hi, v):
-    """The conservative AABB test of box v against volume b of light t (DESIGN "Tests")."""
-    vn, vq, vm, _ = vols
+def box_in_volume(vn, vq, vm, t, b, lo, hi, v):
+    """The conservative AABB test of box v against volume b of light t (DESIGN "Tests");
+    vn, vq, vm = the culling volumes' normals, points and plane counts."""
     for i in range(vm[t, b]):
         if not _plane_ok(vn, vq, t, b, i, lo, hi, v):
             return False
@@ -363,15 +363,14 @@ def cube_faces(p0, p1, p2, r, lo_v, hi_v, v):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def caster_bits(hot, lf, j, typ, vols, t, rec, world):
+def caster_bits(hot, lf, j, typ, t, vn, vq, vm, lo, hi, v, w_lo, w_hi, o):
     """caster_masks entry of an object for point or spot light row j, whose culling volumes
-    are vols[.][t] (one per camera), once the caller has checked casts_shadows, the mask
-    and d2 <= r*r: the spot cone, then some camera's hull, then the cube faces (point) or
-    bit 0 (spot). 0: not a caster. rec = (lo, hi, v): the box as row v of the grid records,
-    in the light's frame (the packed light's); world = (lo, hi, o): the box as row o of
-    the store, in world space like the volumes."""
-    vn, vq, vm, _ = vols
-    lo, hi, v = rec
+    are (vn, vq, vm)[t] (one per camera), once the caller has checked casts_shadows, the
+    mask and d2 <= r*r: the spot cone, then some camera's hull, then the cube faces (point)
+    or bit 0 (spot). 0: not a caster. (lo, hi, v): the box as row v of the grid records,
+    in the light's frame (the packed light's); (w_lo, w_hi, o): the box as row o of the
+    store, in world space like the volumes. (Arrays one by one: pairs.grid_casters calls
+    it once an object.)"""
     if typ == SPOT:
         # float64 whatever the records' precision (float32 + float32 rounds in float32).
         lx, ly, lz = np.float64(lo[v, 0]), np.float64(lo[v, 1]), np.float64(lo[v, 2])
@@ -385,7 +384,7 @@ def caster_bits(hot, lf, j, typ, vols, t, rec, world):
         if not meets:
             return 0
     for k in range(vm.shape[1]):
-        if vm[t, k] >= 0 and box_in_volume(vols, t, k, world[0], world[1], world[2]):
+        if vm[t, k] >= 0 and box_in_volume(vn, vq, vm, t, k, w_lo, w_hi, o):
             if typ == SPOT:
                 return 1
             return cube_faces(hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], lo, hi, v)
