@@ -90,7 +90,8 @@ def _pack_cone(j, lf, typ, outer, inner):
 def _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intensity, prio,
               mask, ids, cam_pos, cam_basis, cam_tan, cam_focus, thesis_w, origin, parts):
     # The arrays come one by one, not as _pack's tuples: a tuple unpacked once a row kept
-    # its reference counting in the loop (20 atomic operations a light, ~12 ns of ~20).
+    # its reference counting in the loop, 20 atomic operations a light on counts both
+    # threads share (packing 10k lights 211 -> 36 us).
     if parts & PACK_POSITION:
         for k in range(3):
             hot[j, k] = position[j, k] - origin[k]

@@ -476,7 +476,7 @@ class Scheduler(SceneAPI):
         # The light rows as last frame's (lrows is None when they were renumbered): they
         # are packed again in last frame's arrays, and only the parts of a row that read a
         # field whose array changed (moving lights: the position only, one line a light;
-        # a whole row at (100k, 10k) cost 0.2 ms, mostly its two lines' traffic).
+        # 10k lights 36 -> 9.5 us).
         thesis = cfg.model == "thesis"
         parts, changed, into = PACK_ALL, [], None
         if c is not None and lrows is not None:
