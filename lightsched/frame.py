@@ -100,13 +100,14 @@ def _empty(name: str, n: int, k: int, cascades: int) -> np.ndarray:
     return np.zeros(1 if name == "caster_offsets" else 0, dtype)
 
 
-def empty_frame(object_id: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
-    """A frame where no object has a light (empty slots as DESIGN section 3 defines them),
-    except for the arrays ``given``, which are taken as they are (not copied)."""
-    fields = {name: given[name] if name in given else _empty(name, object_id.size, k, cascades)
+def empty_frame(ids: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
+    """A frame of the objects ``ids`` where no object has a light (empty slots as DESIGN
+    section 3 defines them), except for the arrays ``given``, which are taken as they are
+    (not copied); object_id is a copy of ``ids`` unless given."""
+    fields = {name: given[name] if name in given else _empty(name, ids.size, k, cascades)
               for name in FRAME_ARRAYS if name != "object_id"}
-    ids = given["object_id"] if "object_id" in given else object_id.astype(np.int32, copy=True)
-    return Frame(object_id=ids, **fields)
+    object_id = given["object_id"] if "object_id" in given else ids.astype(np.int32, copy=True)
+    return Frame(object_id=object_id, **fields)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
