@@ -1348,6 +1348,12 @@ def widen_walkers(hot, walk, positions, wide, skin_lead):
     return sel
 
 
+# left_spheres loops on the calling thread below this many lights: ~2 ns a light, so
+# below a few thousand waking the second thread costs what it would save (1k: 2.6 us on
+# one thread, 2.8 on two).
+SERIAL_SPHERES = 4096
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _left_sphere(hot, anchor, j):
     """left_spheres' test of light row j."""
@@ -1367,9 +1373,9 @@ def left_spheres(hot, anchor, own):
     i.e. |p - anchor| + r > reach, with room for rounding (while it stays inside, every
     object it reaches is within reach of the anchor). One loop, not numpy on the [L, 8]
     records' strided columns: 0.02 against ~0.55 ms at 10k lights; parallel from
-    SERIAL_LIGHTS lights (10k: 20 -> 11 us)."""
+    SERIAL_SPHERES lights (10k: 20 -> 11 us)."""
     out = np.zeros(hot.shape[0], np.bool_)
-    if hot.shape[0] < SERIAL_LIGHTS:
+    if hot.shape[0] < SERIAL_SPHERES:
         for j in range(hot.shape[0]):
             if own[j]:
                 out[j] = _left_sphere(hot, anchor, j)

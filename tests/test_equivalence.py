@@ -421,7 +421,7 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     incremental frame's changed lights) writes those rows as a whole packing does, and no
     other; the packing of one part of them (PACK_*) those columns and no other."""
     from lightsched.frustum import SERIAL_LIGHTS, lights_visible
-    from lightsched.pairs import left_spheres, light_bounds
+    from lightsched.pairs import SERIAL_SPHERES, left_spheres, light_bounds
     from lightsched.priority import (
         PACK_ALL,
         PACK_AXIS,
@@ -488,14 +488,18 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.grid, n_vis)
               for m in (n, few)]
     assert np.array_equal(bounds[0][:few + 1], bounds[1]) and bounds[1][-1] > 0
-    # Spheres around the lights' own, some of which they have left.
+    # left_spheres (serial below SERIAL_SPHERES lights): spheres round the lights' own
+    # (these lights' rows repeated), some of which they have left.
+    m_big = 2 * SERIAL_SPHERES
     rng = np.random.default_rng(4)
-    anchor = np.concatenate([hot[:, :3] + rng.normal(0.0, 0.5, (n, 3)),
-                             hot[:, 3:4] * rng.uniform(0.9, 1.3, (n, 1))], axis=1)
+    spheres = hot[np.arange(m_big) % n]
+    anchor = np.concatenate([spheres[:, :3] + rng.normal(0.0, 0.5, (m_big, 3)),
+                             spheres[:, 3:4] * rng.uniform(0.9, 1.3, (m_big, 1))], axis=1)
     anchor[::7, 3] = 0.0
-    own = rng.random(n) < 0.9
-    left = [left_spheres(hot[:m], anchor[:m], own[:m]) for m in (n, few)]
-    assert np.array_equal(left[0][:few], left[1]) and left[1].any() and not left[1].all()
+    own = rng.random(m_big) < 0.9
+    few_s = SERIAL_SPHERES - 1
+    left = [left_spheres(spheres[:m], anchor[:m], own[:m]) for m in (m_big, few_s)]
+    assert np.array_equal(left[0][:few_s], left[1]) and left[1].any() and not left[1].all()
     # The rows read at random (packed lights, object records) start on a cache line.
     assert all(a.ctypes.data % 64 == 0 for a in (*c.packed, *s._buffers.values()))
 
