@@ -445,11 +445,11 @@ class Scheduler(SceneAPI):
         origin = np.zeros(3) if not fast else (
             c.origin if c is not None and not full else frames.position[0].copy())
         rec_frame = (origin, fast)
+        same_origin = c is not None and np.array_equal(origin, c.origin)
         # Object visibility and records depend on the objects, the cameras and the records'
         # origin only: a full frame (most lights changed) keeps them too when those are as
         # they were.
-        objects_kept = (c is not None and same_cams and orows is not None and orows.size == 0
-                        and np.array_equal(origin, c.origin))
+        objects_kept = (same_origin and same_cams and orows is not None and orows.size == 0)
 
         # Visibility (DESIGN "Visibility").
         vis_l = lights_visible(lights.type, lights.position, lights.radius, frames.plane_n,
@@ -457,8 +457,7 @@ class Scheduler(SceneAPI):
         # With the cameras as they were, only the objects that changed are tested again;
         # the box of the visible objects then takes in theirs without letting go of the
         # old one (it only sets a grid's extent, which may be larger than needed).
-        objects_moved = (c is not None and same_cams and orows is not None and 0 < orows.size
-                         and np.array_equal(origin, c.origin))
+        objects_moved = same_origin and same_cams and orows is not None and 0 < orows.size
         if objects_kept:
             vis_o, box = c.vis_o, c.box
         elif objects_moved:
@@ -485,7 +484,7 @@ class Scheduler(SceneAPI):
             if thesis and not same_cams:
                 parts |= PACK_CAMERA
                 changed.append("cameras")
-            if not np.array_equal(origin, c.origin):
+            if not same_origin:
                 parts |= PACK_POSITION
                 changed.append("origin")
             into = c.packed
@@ -563,7 +562,7 @@ class Scheduler(SceneAPI):
         # object are the ones they were made with; a camera move changes only the masks of
         # the records whose visibility changed, in their row-order copy as in the grid's.
         cands_valid = (CANDIDATE_LISTS and c is not None and orows is not None
-                       and orows.size == 0 and np.array_equal(origin, c.origin) and grid_kept
+                       and orows.size == 0 and same_origin and grid_kept
                        and lrows is not None and grid.shown is not None
                        and n >= CANDIDATE_MIN_OBJECTS)
         cands = c.cands if cands_valid and c is not None else None
