@@ -528,26 +528,17 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
                 continue
             c = _light_cells(hot, j, g_f, dims, ext)
             rr = _reach2(hot, j)
-            # The walk of _column_run written out: through the helper this loop ran ~10%
-            # slower (measured at (100k, 10k)), and it is the hottest loop of a frame.
             for x in range(c[0], c[3] + 1):
                 dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
                 if dxx > rr:
                     continue
                 for y in range(c[1], c[4] + 1):
-                    dd = dxx + _slab_d2(hot[j, 1], y, g_f[1], 1.0 / g_f[4], dims[1], ext[1])
-                    if dd > rr:
-                        continue
-                    zr = math.sqrt(rr - dd) * (1.0 + 1e-9) + ext[2]
-                    z0 = max(c[2], _cell(hot[j, 2] - zr, g_f[2], g_f[5], dims[2]))
-                    z1 = min(c[5], _cell(hot[j, 2] + zr, g_f[2], g_f[5], dims[2]))
-                    if z1 < z0:
-                        continue
-                    base = (x * dims[1] + y) * dims[2]
                     # The objects centred in a column of cells are one run of positions.
-                    n, keep = _run_pairs(cell_start[base + z0], cell_start[base + z1 + 1], hot,
-                                         lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_obj,
-                                         pair_p, n, keep, model, w_obj, w_int)
+                    v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
+                    if v1 > v0:
+                        n, keep = _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits,
+                                             vis_rows, pair_obj, pair_p, n, keep, model, w_obj,
+                                             w_int)
             if vis_box.itemsize == 8:
                 # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
                 if typ == POINT and model == MODEL_CONTRIBUTION:
@@ -600,7 +591,7 @@ def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_ob
                keep, model, w_obj, w_int):
     """The pairs of light j with the objects at positions v0..v1-1, appended at n. Float64
     records go eight at a time through simd.point_run (the range test and the mask), which
-    appends (position, d2) of the hits; _one_light finishes them after the walk. Float32
+    appends (position, d2) of the hits; light_pass finishes them after the walk. Float32
     records ("fast") take the scalar loop: the range test (exact, DESIGN's d2 <= r*r)
     compacts the survivors and their d2 into ``keep`` without branching (a test that fails
     at random would mispredict); the rest of Affects and P run on survivors only. Returns
