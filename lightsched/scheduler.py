@@ -601,7 +601,7 @@ class Scheduler(SceneAPI):
                       and not fast and not cfg.directional_in_slots)
         by_lists = lists_path and cands is not None and changed_l.size > 0
         if full and cands_valid:
-            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid,
+            cands, walk, built = self._candidates(cands, packed, compete, dir_all, grid,
                                                   not same_cams, last_position)
             fresh = None
             plan["pairs"] += cands_plan(built, walk)
@@ -611,7 +611,7 @@ class Scheduler(SceneAPI):
             # and (lists stage) those of lights whose shadow map or "skip" status changed.
             reach = np.zeros(n, np.bool_)
             list_objects(cands.by_light, changed_l, reach)
-            cands, walk, built = self._candidates(cands, packed, compete, is_dir, grid, False,
+            cands, walk, built = self._candidates(cands, packed, compete, dir_all, grid, False,
                                                   last_position)
             list_objects(cands.by_light, walk, reach)
             fresh = None
@@ -657,7 +657,7 @@ class Scheduler(SceneAPI):
                               f"new pairs {how} {np.count_nonzero(compete)} lights; "
                               f"{left_rows.size} objects left the view")
             if lists_path and cands is None:
-                cands, walk, _ = self._candidates(None, packed, compete, is_dir, grid, False,
+                cands, walk, _ = self._candidates(None, packed, compete, dir_all, grid, False,
                                                   last_position)
                 plan["pairs"] += cands_plan(True, walk) + " for the next frames"
         t = _lap(seconds, "pairs", t)
@@ -1080,7 +1080,7 @@ class Scheduler(SceneAPI):
                             p_params, len(objs))
 
     def _candidates(self, old: _Candidates | None, packed: tuple[np.ndarray, np.ndarray],
-                    compete: np.ndarray, is_dir: np.ndarray, grid: _Grid, hidden: bool,
+                    compete: np.ndarray, dir_all: np.ndarray, grid: _Grid, hidden: bool,
                     last_position: np.ndarray | None = None
                     ) -> tuple[_Candidates, int, bool]:
         """The candidate lists for this frame's lights (``old`` valid or None): a competing
@@ -1096,11 +1096,13 @@ class Scheduler(SceneAPI):
         ``hidden`` (the camera moves) they hold the objects out of view too, by their own
         mask, so that they serve the objects a moving camera brings into view; else only the
         objects in view, which keeps the walks and lists of a still camera ~25% smaller at
-        (1M, 100k). Returns (lists, the rows of the lights whose lists changed: those walked
-        and those dropped, made from scratch)."""
+        (1M, 100k). ``dir_all``: the rows of the directional lights. Returns (lists, the
+        rows of the lights whose lists changed: those walked and those dropped, made from
+        scratch)."""
         hot = packed[0]
         n_l = hot.shape[0]
-        own = compete & ~is_dir
+        own = compete.copy()
+        own[dir_all] = False
         walk_mask = own
         hold = hidden if old is None else old.hidden
         gone = np.zeros(0, np.int64)
@@ -1115,8 +1117,7 @@ class Scheduler(SceneAPI):
                 # found nothing.
                 # (Read at the few directional rows: the whole column is ~10 us at 10k
                 # lights.)
-                d_rows = np.flatnonzero(is_dir)
-                gone = d_rows[old.anchor[d_rows, 3] > 0]
+                gone = dir_all[old.anchor[dir_all, 3] > 0]
         # The walk as the light pass's with every light a point light of the widened radius
         # and every mask bit (its P are not used). The walk reads the rows of the lights it
         # walks only: those are written, into a kept buffer (the copy of every row and its
