@@ -1,0 +1,21 @@
+"""Compile options shared by the parallel kernels.
+
+numba's ``parallel=True`` also turns whole-array numpy calls inside a kernel (``np.zeros``,
+``np.full``, ``a.sum()``, ``a.max()``, ``a[:] = x``) into parallel loops of their own, and
+each one, however small, wakes the second thread and waits for it: ~1 us a call on this
+2-core box (``pairs.light_bounds`` on 3 lights took 3.2 us, with its two ``np.zeros`` left
+serial 1.1). The kernels say where they want both cores, with ``prange``; ``prange_only()``
+keeps everything else on the calling thread.
+"""
+
+from __future__ import annotations
+
+
+def prange_only() -> dict[str, bool]:
+    """numba's ``parallel`` option with only explicit ``prange`` loops run in parallel (no
+    conversion of numpy calls, array expressions, in-place operators or reductions on
+    arrays, and no fusion of adjacent loops, so each prange runs as written). A new dict
+    each call: numba consumes the one it is given."""
+    return {"prange": True, "comprehension": False, "reduction": False,
+            "inplace_binop": False, "setitem": False, "numpy": False, "stencil": False,
+            "fusion": False}
