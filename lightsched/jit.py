@@ -10,12 +10,18 @@ keeps everything else on the calling thread.
 
 from __future__ import annotations
 
+from numba.core.cpu import ParallelOptions
 
-def prange_only() -> dict[str, bool]:
+
+def prange_only() -> ParallelOptions:
     """numba's ``parallel`` option with only explicit ``prange`` loops run in parallel (no
     conversion of numpy calls, array expressions, in-place operators or reductions on
-    arrays, and no fusion of adjacent loops, so each prange runs as written). A new dict
-    each call: numba consumes the one it is given."""
-    return {"prange": True, "comprehension": False, "reduction": False,
-            "inplace_binop": False, "setitem": False, "numpy": False, "stencil": False,
-            "fusion": False}
+    arrays, and no fusion of adjacent loops, so each prange runs as written).
+
+    A ParallelOptions, not the dict numba documents: numba reads a dict by popping its
+    keys when it compiles the kernel's first signature, so every later signature found
+    the dict empty and was compiled with every conversion on (the default of each key).
+    A ParallelOptions is copied, not consumed."""
+    return ParallelOptions({"prange": True, "comprehension": False, "reduction": False,
+                            "inplace_binop": False, "setitem": False, "numpy": False,
+                            "stencil": False, "fusion": False})
