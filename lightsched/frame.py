@@ -15,7 +15,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from .jit import prange_only
+from .jit import PRANGE_ONLY
 
 # name -> (dtype, shape suffix kind): "N" per object, "NK" per object slot, others 1-D.
 FRAME_ARRAYS: dict[str, Any] = {
@@ -160,7 +160,7 @@ def row_words(a: np.ndarray) -> np.ndarray:
     return rows
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def copy_rows(src, dst, rows):
     """dst[r] = src[r] for the rows ``rows`` of two [N, W] arrays (parallel)."""
     for i in nb.prange(rows.shape[0]):

@@ -14,7 +14,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .jit import prange_only
+from .jit import PRANGE_ONLY
 from .scene import DIRECTIONAL, Camera
 
 
@@ -88,7 +88,7 @@ def cascade_splits(cameras: list[Camera], cascades: int, shadow_distance: float)
 VISIBLE_BLOCK = 512
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
     """visible[o] iff o's AABB is in at least one camera frustum: for every plane of it,
     the box's corner farthest along the plane's normal n (hi on an axis where n >= 0, lo
@@ -187,7 +187,7 @@ def _visible_block(a0, size, light_type, position, radius, plane_n, plane_p, out
         out[a0 + i] = vis[i] | (light_type[a0 + i] == DIRECTIONAL)
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def lights_visible(light_type, position, radius, plane_n, plane_p):
     """Point/spot: the ball (position, r) is in some frustum; directional: always.
 

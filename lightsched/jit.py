@@ -4,7 +4,7 @@ numba's ``parallel=True`` also turns whole-array numpy calls inside a kernel (``
 ``np.full``, ``a.sum()``, ``a.max()``, ``a[:] = x``) into parallel loops of their own, and
 each one, however small, wakes the second thread and waits for it: ~1 us a call on this
 2-core box (``pairs.light_bounds`` on 3 lights took 3.2 us, with its two ``np.zeros`` left
-serial 1.1). The kernels say where they want both cores, with ``prange``; ``prange_only()``
+serial 1.1). The kernels say where they want both cores, with ``prange``; ``PRANGE_ONLY``
 keeps everything else on the calling thread.
 """
 
@@ -12,16 +12,12 @@ from __future__ import annotations
 
 from numba.core.cpu import ParallelOptions
 
-
-def prange_only() -> ParallelOptions:
-    """numba's ``parallel`` option with only explicit ``prange`` loops run in parallel (no
-    conversion of numpy calls, array expressions, in-place operators or reductions on
-    arrays, and no fusion of adjacent loops, so each prange runs as written).
-
-    A ParallelOptions, not the dict numba documents: numba reads a dict by popping its
-    keys when it compiles the kernel's first signature, so every later signature found
-    the dict empty and was compiled with every conversion on (the default of each key).
-    A ParallelOptions is copied, not consumed."""
-    return ParallelOptions({"prange": True, "comprehension": False, "reduction": False,
-                            "inplace_binop": False, "setitem": False, "numpy": False,
-                            "stencil": False, "fusion": False})
+# numba's ``parallel`` option with only explicit ``prange`` loops run in parallel (no
+# conversion of numpy calls, array expressions, in-place operators or reductions on arrays,
+# and no fusion of adjacent loops, so each prange runs as written). A ParallelOptions, not
+# the dict numba documents: numba reads a dict by popping its keys when it compiles a
+# kernel's first signature, so every later signature found it empty and was compiled with
+# every conversion on (each key's default). A ParallelOptions is copied, so one serves all.
+PRANGE_ONLY = ParallelOptions({"prange": True, "comprehension": False, "reduction": False,
+                               "inplace_binop": False, "setitem": False, "numpy": False,
+                               "stencil": False, "fusion": False})

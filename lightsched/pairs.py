@@ -51,7 +51,7 @@ import numpy as np
 
 from .fade import fade_object, held_slots, steady_slots
 from .frustum import SERIAL_LIGHTS
-from .jit import prange_only
+from .jit import PRANGE_ONLY
 from .priority import MODEL_CONTRIBUTION, box_d2, falloff, spot_cone, thesis
 from .scene import DIRECTIONAL, ON, POINT, SPOT
 from .select import (
@@ -148,7 +148,7 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, cell: float) -> tuple[np.ndarray,
     return g_f, np.array(dims, np.int64)
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def _centre_cells(lo, hi, visible, g_f, dims, frame):
     """Per object: its centre's cell, ncell for an object with a half-extent over one cell
     edge (it goes past the last cell, to the big objects every light tests directly), or
@@ -187,7 +187,7 @@ def record_coord(x, origin, single):
     return np.float64(np.float32(d)) if single else d
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def _counting_sort(key, ncell):
     """Rows with key >= 0 sorted by key (stable): (rows by position, position of each row or
     -1, start of each key's positions [ncell + 2]). GROUP_PARTS runs of rows count and place
@@ -262,7 +262,7 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
     return _counting_sort(key, int(dims[0] * dims[1] * dims[2]))
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def visible_objects(lo, hi, omask, vis_rows, n_small, recs, origin):
     """Per grid position v (parallel), written into recs = (vis_box [V, 8], its integer view
     vis_bits): (lo - origin, hi - origin, mask (as bits), e2 = |hi - lo|^2) of object row
@@ -317,7 +317,7 @@ def _record_fits(o, lo, hi, grid, v, frame):
     return True
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def move_records(lo, hi, rows, shown_mask, grid, recs, pos_of, frame):
     """The records of the moved object ``rows`` rewritten in place in a kept grid of every
     object, as visible_objects writes them (shown_mask: per row of ``rows``, its mask, or 0
@@ -429,7 +429,7 @@ def _light_bound(hot, j, g_f, dims, cell_start, ext, n_big, n_vis):
     return total
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def light_bounds(hot, rows, grid, n_vis):
     """Offsets [len(rows) + 1] of each light's segment in the pair buffers: the prefix sum
     of an upper bound of the pairs it can emit (objects centred in the cells of its
@@ -488,7 +488,7 @@ def _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_bits, vis_rows, pair_ob
     return n
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     """For each light in ``rows`` (parallel), its affecting pairs with visible objects:
     pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
@@ -620,7 +620,7 @@ def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_ob
     return n, keep
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def affects_any(lights, rows, grid, vis):
     """Per light of ``rows`` (parallel): whether it affects at least one object of the grid
     (DESIGN "Affects": mask, range, cone), stopping at the first hit. An incremental frame
@@ -728,7 +728,7 @@ def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, 
     return n
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     """Casters (DESIGN "Casters") of the shadowed point and spot lights ``rows`` (parallel)
     among the objects of a grid built like the light pass's (visible_order /
@@ -777,7 +777,7 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     return count
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
     the order it writes its outputs. The lights are split into one run per row of the
@@ -894,7 +894,7 @@ def start_at(rows, obj, n):
     return start
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, used):
     """The pairs of the object ``rows`` (int64, ascending) from their candidate lights
     (scheduler._Candidates: the point and spot lights whose sphere, widened by a skin,
@@ -1233,7 +1233,7 @@ def _grid_bound(r, box, lgrid):
     return m
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
     """direct_pairs with each object's candidates from a grid of the point and spot lights
     (light_grid): the lights of the cells its box overlaps, and the big ones. The same
@@ -1358,7 +1358,7 @@ def _left_sphere(hot, anchor, j):
                 <= reach)
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def left_spheres(hot, anchor, own):
     """Per light row: an ``own`` light whose sphere no longer lies inside the one its
     candidate lists were found with (anchor [L, 4]: centre and widened radius, 0 for none),
@@ -1378,7 +1378,7 @@ def left_spheres(hot, anchor, own):
     return out
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def spread_lists(start, light_j, lists):
     """Candidate lists grouped by object (object o's at start[o]..start[o+1]-1 of
     ``light_j``) copied into rooms with space to grow (len + 2 + len // 2 each), so that
@@ -1406,7 +1406,7 @@ def spread_lists(start, light_j, lists):
                 cand[seg[o, 0] + t] = light_j[start[o] + t]
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def compact_light_lists(by_light, spare):
     """The lists by light row packed into a new array with ``spare`` free records after
     them (the segments light_lists left behind are garbage); returns (seg, object rows,
@@ -1486,7 +1486,7 @@ def light_lists(walked, by_light, used):
     return used
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def edit_candidates(walked, lists, by_light):
     """The object lists of the walked lights made again in place: each walked light is
     dropped from the lists of the objects it had (``by_light``, before ``light_lists``
@@ -1584,7 +1584,7 @@ def _select(p, j, lid, sf, si, nbest, h, h_abs):
     return topk_insert(sf, si, nbest, hysteresis_key(p, lid, si, h, h_abs), lid, p, j)
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
@@ -1741,7 +1741,7 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
 # the segments it no longer points to are garbage until the heap is compacted.
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def scan_pairs(seg, heap_j, light_flag, drop):
     """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
     so an incremental frame finds the objects that hold a pair of a changed light, and
@@ -1779,7 +1779,7 @@ def scan_pairs(seg, heap_j, light_flag, drop):
     return out, kept
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def compact_heap(seg, heap, out):
     """The live segments of the heap (P, light row) packed from the start of ``out`` (P,
     light row), another heap with room for them (the records after them are free); returns
@@ -1805,7 +1805,7 @@ def compact_heap(seg, heap, out):
     return new_seg, out, used
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def replace_lists(rows, mode, cache, walked, kept, fresh, used):
     """New pair lists of the object ``rows`` (ascending), appended to the heap from record
     ``used`` (the caller made room). mode per row: 0 empty (the object left the view), 1

@@ -23,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from .frustum import SERIAL_LIGHTS, CameraFrames
-from .jit import prange_only
+from .jit import PRANGE_ONLY
 from .scene import DIRECTIONAL, SPOT, LightStore
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
@@ -122,7 +122,7 @@ def _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intens
         lf[j, 7] = best
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def _pack(rows, store, cams, thesis_w, origin, out, parts):
     """store = the light store's (type, position, radius, direction, outer_angle,
     inner_angle, intensity, priority, mask, id); cams = the cameras' (position, basis,

@@ -27,7 +27,7 @@ import numba as nb
 import numpy as np
 
 from .frustum import CameraFrames
-from .jit import prange_only
+from .jit import PRANGE_ONLY
 from .priority import berka_eccentricity, spot_cone
 from .scene import DIRECTIONAL, SPOT, LightStore
 from .select import F_NEW_W, I_NEW_ROW
@@ -424,7 +424,7 @@ def _block_in_planes(vn, vq, t, b, first, end, lead, box, inside):
     return True, lead
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def sweep_casters(lo, hi, casts, omask, lmask, vols):
     """caster_masks of every object for each directional light t (parallel over blocks of
     SWEEP_BLOCK objects): bit b set iff the object casts, its mask matches lmask[t] and its
@@ -495,7 +495,7 @@ def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
         bits[t, o0:o0 + m] = acc
 
 
-@nb.njit(cache=True, nogil=True, parallel=prange_only(), error_model="numpy")
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def hidden_near(lo, hi, casts, visible, box):
     """Rows (ascending) of the invisible casting objects whose box meets ``box`` (lo, hi
     [6]): the candidates a point or spot light's casters need beside the visible objects.

@@ -12,7 +12,7 @@ import numpy as np
 from numba.core.registry import CPUDispatcher
 
 import lightsched
-from lightsched.jit import prange_only
+from lightsched.jit import PRANGE_ONLY
 
 
 def _kernels() -> list[tuple[str, CPUDispatcher]]:
@@ -29,8 +29,8 @@ def test_parallel_kernels_use_prange_only() -> None:
     parallel = [(name, k.targetoptions["parallel"]) for name, k in _kernels()
                 if "parallel" in k.targetoptions]
     assert len(parallel) >= 20, [name for name, _ in parallel]
-    bad = [name for name, option in parallel if option != prange_only()]
-    assert not bad, f"parallel kernels not compiled with prange_only(): {bad}"
+    bad = [name for name, option in parallel if option != PRANGE_ONLY]
+    assert not bad, f"parallel kernels not compiled with PRANGE_ONLY: {bad}"
 
 
 def _zero_then_fill(a):
@@ -51,7 +51,7 @@ def test_prange_only_holds_for_every_signature() -> None:
     consumed a dict option then, and the next signatures turned np.zeros into a parallel
     loop of its own (the count the bare parallel=True gives, checked alongside)."""
     arrays = [np.arange(5, dtype=dtype) for dtype in (np.float64, np.float32, np.int64)]
-    kernel = nb.njit(parallel=prange_only())(_zero_then_fill)
+    kernel = nb.njit(parallel=PRANGE_ONLY)(_zero_then_fill)
     every = nb.njit(parallel=True)(_zero_then_fill)
     for a in arrays:
         np.testing.assert_array_equal(kernel(a), np.arange(5.0))

@@ -21,7 +21,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.jit import prange_only
+from lightsched.jit import PRANGE_ONLY
 from lightsched.pairs import (
     OBJECT_CHUNK,
     _finish_hits,
@@ -541,7 +541,7 @@ class _Packing:
 
 
 # candidate_pairs compiled afresh per packing (and record dtype), on first use.
-STREAMS = {packing: nb.njit(parallel=prange_only(), nogil=True, error_model="numpy")(
+STREAMS = {packing: nb.njit(parallel=PRANGE_ONLY, nogil=True, error_model="numpy")(
     candidate_pairs.py_func) for packing in PACKINGS}
 
 
