@@ -87,7 +87,7 @@ def freeze(frame: Frame) -> Frame:
     """Makes every array of the frame read-only: a frame is a snapshot, and the fast
     scheduler keeps its light_ids and fade_state as the next frame's slot state."""
     for arr in frame.arrays().values():
-        arr.flags.writeable = False
+        arr.setflags(write=False)
     return frame
 
 

@@ -860,6 +860,32 @@ def test_valid_camera_edges_pass_validation():
     assert all(c.position.dtype == np.float64 for c in cams)
 
 
+def test_camera_vectors_of_every_kind_validate_alike():
+    """Vectors given as float64 arrays, lists or tuples of floats (validate_cameras' fast
+    paths) or of ints, or float32 arrays (numpy's path) give the same validated camera:
+    new read-only float64 arrays, the same bits."""
+    from lightsched.scene import validate_cameras
+
+    vecs = {"position": [1.5, -2.0, 1e7], "forward": [0.0, -3.0, 0.25], "up": [0.0, 1.0, 0.0],
+            "focus": [0.5, -1.0]}
+    ints = {"position": [1, -2, 10_000_000], "forward": [0, -12, 1], "up": [0, 1, 0],
+            "focus": [1, -1]}
+    kinds = [lambda v: np.array(v, np.float64), list, tuple]
+    want = validate_cameras([camera(**{k: np.array(v) for k, v in vecs.items()})])[0]
+    for kind in kinds:
+        given = {k: kind(v) for k, v in vecs.items()}
+        got = validate_cameras([camera(**given)])[0]
+        for name in vecs:
+            a = getattr(got, name)
+            assert a.dtype == np.float64 and not a.flags.writeable
+            assert a is not given[name]
+            assert a.tobytes() == getattr(want, name).tobytes()
+    for kind in (list, tuple, lambda v: np.array(v, np.float32)):
+        got = validate_cameras([camera(**{k: kind(v) for k, v in ints.items()})])[0]
+        for name, v in ints.items():
+            assert getattr(got, name).tolist() == [float(x) for x in v]
+
+
 def test_validated_cameras_pass_again_until_a_field_is_replaced(s):
     """A camera validate_cameras returned passes again as itself (the service checks a
     request's cameras, then the frame would check them again); its vectors are read-only,
