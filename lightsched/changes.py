@@ -48,7 +48,9 @@ def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...
             return None
         rows = None  # a set_ call with the same ids: compare every row
     elif store.touched:
-        rows = _sorted_unique(np.concatenate(store.touched), ids.size)
+        touched = store.touched
+        rows = _sorted_unique(touched[0] if len(touched) == 1 else np.concatenate(touched),
+                              ids.size)
     else:
         return np.zeros(0, np.int64)
     n = ids.size if rows is None else rows.size

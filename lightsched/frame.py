@@ -86,8 +86,8 @@ class Frame:
 def freeze(frame: Frame) -> Frame:
     """Makes every array of the frame read-only: a frame is a snapshot, and the fast
     scheduler keeps its light_ids and fade_state as the next frame's slot state."""
-    for arr in frame.arrays().values():
-        arr.setflags(write=False)
+    for name in FRAME_ARRAYS:
+        getattr(frame, name).setflags(write=False)
     return frame
 
 

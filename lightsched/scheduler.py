@@ -1374,8 +1374,8 @@ class Scheduler(SceneAPI):
         count = grid_casters(lights_packed, rows, grid, recs,
                              (objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
                              vols, offsets, out)
-        spans = list(zip(offsets[:-1].tolist(), (offsets[:-1] + count).tolist(), strict=True))
-        return [out[0][a:b] for a, b in spans], [out[1][a:b] for a, b in spans]
+        spans = list(zip(offsets.tolist(), count.tolist(), strict=False))
+        return [out[0][a:a + m] for a, m in spans], [out[1][a:a + m] for a, m in spans]
 
 
 def _frame_box(box: np.ndarray, frame: tuple[np.ndarray, bool]) -> np.ndarray:
