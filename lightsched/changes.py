@@ -61,7 +61,7 @@ def changed_rows(last: dict[str, np.ndarray], store: Any, fields: tuple[str, ...
             same = np.zeros(0, np.int64) if rows is None else rows
             rows_differ(row_words(a), same, row_words(b), same, changed)
     out = np.flatnonzero(changed) if rows is None else rows[changed]
-    return out.astype(np.int64)
+    return out.astype(np.int64, copy=False)
 
 
 def _sorted_unique(rows: np.ndarray, n: int) -> np.ndarray:

@@ -40,6 +40,9 @@ FRAME_ARRAYS: dict[str, Any] = {
 }
 
 
+# The word types row_words tiles rows with, widest first, with their sizes in bytes.
+_WORDS = ((8, np.uint64), (4, np.uint32), (2, np.uint16))
+
 # Per-object arrays: dtype, shape ("N" or "NK") and the value of an empty slot (DESIGN
 # section 3), in the order pairs.object_pass writes them (after "visible").
 PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
@@ -153,11 +156,13 @@ def changed_rows(prev: Frame, cur: Frame, names: tuple[str, ...]) -> np.ndarray:
 def row_words(a: np.ndarray) -> np.ndarray:
     """Rows as the widest words that tile them (bitwise: a row "differs" when its bytes
     do), so a row of 8 int32 is compared as 4 int64."""
-    rows = np.ascontiguousarray(a).reshape(a.shape[0], -1).view(np.uint8)
-    for word in (np.uint64, np.uint32, np.uint16):
-        if rows.shape[1] % np.dtype(word).itemsize == 0:
+    rows = np.ascontiguousarray(a)
+    rows = rows.reshape(rows.shape[0], -1)
+    width = rows.shape[1] * rows.itemsize
+    for size, word in _WORDS:
+        if width % size == 0:
             return rows.view(word)
-    return rows
+    return rows.view(np.uint8)
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")

@@ -1280,7 +1280,7 @@ class Scheduler(SceneAPI):
             vn, vq, vm, shared = culling_volumes(lights, rows_t, frames, splits,
                                                  self.config.cascade_overlap)
             lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
-            is_dir = (lights.type[rows_t] == DIRECTIONAL).tolist()
+            is_dir = [t == DIRECTIONAL for t in lights.type[rows_t].tolist()]
             sun = [i for i, d in enumerate(is_dir) if d]
             patched = [] if patch is None else [i for i in sun if not patch[1][todo[i]]]
             sun = [i for i in sun if i not in patched]
