@@ -287,10 +287,11 @@ def test_ids_must_be_integers(s, bad):
 
 @pytest.mark.parametrize("span", [3, 1000], ids=["dense ids", "sparse ids"])
 def test_large_updates_find_the_same_rows_and_errors_as_small_ones(sched_cls, span):
-    """An update of many rows finds them through an id -> row table kept until the ids
-    change (scene._bulk_rows; sparse ids fall back to binary search), one of few rows by
-    binary search: the same stored rows, and for bad ids the same error (the duplicate
-    check comes before the unknown-id check in either)."""
+    """An update finds its rows through an id -> row table kept until the ids change
+    (scene._bulk_rows; sparse ids fall back to binary search), its repeated ids by marking
+    rows (many) or sorting them (few): the same stored rows whether sent at once or 63 at
+    a time, and for bad ids the same error (the duplicate check comes before the
+    unknown-id check in either)."""
     rng = np.random.default_rng(5)
     n = 4000
     ids = rng.permutation(span * n)[:n]
@@ -326,6 +327,87 @@ def test_large_updates_find_the_same_rows_and_errors_as_small_ones(sched_cls, sp
     assert np.array_equal(bulk.lights.id, rest)
     bulk.update_lights(id=rest[::-1], radius=np.full(rest.size, 3.0))
     assert (bulk.lights.radius == 3.0).all()
+
+
+UPDATE_LIGHT_FIELDS = ("position", "radius", "direction", "angles", "intensity", "priority",
+                      "shadows", "mask")
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 40), rows_kind=st.sampled_from(["every, in order", "every, permuted",
+                                                        "some"]),
+       fields=st.sets(st.sampled_from(UPDATE_LIGHT_FIELDS), min_size=1),
+       fortran=st.booleans(), seed=st.integers(0, 2**16))
+def test_updates_write_the_given_rows_and_nothing_else(n, rows_kind, fields, fortran, seed):
+    """update_lights and update_objects through each way of writing (every row in row
+    order: the validated columns become the store's; otherwise a copy with the rows put
+    in, 2-D rows moved as one item each): the given rows hold the given values (as
+    validation defines them: cast, directions normalised), the other rows and fields keep
+    their bits, the arrays the last frame held are untouched (copy on write), and the
+    store's arrays stay C-contiguous, of their dtype, and none is the caller's array."""
+    rng = np.random.default_rng(seed)
+    ids = rng.permutation(3 * n)[:n]
+    s = ls.Scheduler()
+    s.set_lights(id=ids, type=rng.integers(0, 3, n), position=rng.uniform(-50, 50, (n, 3)),
+                 radius=rng.uniform(1, 9, n), direction=rng.uniform(0.5, 1.0, (n, 3)),
+                 intensity=rng.uniform(0, 4, n), shadows=rng.random(n) < 0.5,
+                 mask=rng.integers(0, 2**32, n))
+    lo = rng.uniform(-50, 50, (n, 3))
+    s.set_objects(id=ids, bounds_min=lo, bounds_max=lo + 1.0, mask=rng.integers(0, 2**32, n))
+    if rows_kind == "every, in order":
+        rows = np.arange(n)
+    elif rows_kind == "every, permuted":
+        rows = rng.permutation(n)
+    else:
+        rows = rng.permutation(n)[:rng.integers(1, n + 1)]
+    m = rows.size
+    given: dict[str, np.ndarray] = {}
+    if "position" in fields:
+        given["position"] = rng.uniform(-50, 50, (m, 3))
+    if "radius" in fields:
+        given["radius"] = rng.uniform(1, 9, m)
+    if "direction" in fields:
+        given["direction"] = rng.uniform(0.5, 1.0, (m, 3))
+    if "angles" in fields:
+        given["outer_angle"] = rng.uniform(0.2, 1.5, m)
+        given["inner_angle"] = given["outer_angle"] * 0.5
+    if "intensity" in fields:
+        given["intensity"] = rng.uniform(0, 4, m)
+    if "priority" in fields:
+        given["priority"] = rng.uniform(-1, 1, m).astype(np.float32)
+    if "shadows" in fields:
+        given["shadows"] = rng.integers(0, 2, m)
+    if "mask" in fields:
+        given["mask"] = rng.integers(0, 2**32, m, dtype=np.uint64)
+    if fortran:
+        given = {k: np.asfortranarray(v) for k, v in given.items()}
+    sent = {k: v.copy() for k, v in given.items()}
+    row_of = np.searchsorted(s.lights.id, ids[rows])
+    for store, call, kw in (
+            (s.lights, s.update_lights, given),
+            (s.objects, s.update_objects,
+             {"bounds_min": lo[rows] - 2.0, "bounds_max": lo[rows] + 3.0,
+              "static": rng.random(m) < 0.5, "mask": rng.integers(0, 2**32, m)})):
+        names = LIGHT_FIELDS if store is s.lights else OBJECT_FIELDS
+        held = {f: getattr(store, f) for f in names}
+        kept = {f: a.copy() for f, a in held.items()}
+        call(id=ids[rows], **kw)
+        for f in names:
+            now, old = getattr(store, f), kept[f]
+            assert np.array_equal(held[f], old), f"{f}: last frame's array was written"
+            assert now.dtype == old.dtype and now.shape == old.shape, f
+            assert now.flags.c_contiguous, f
+            assert not any(np.shares_memory(now, v) for v in kw.values()), f
+            want = old.copy()
+            if f in kw:
+                value = np.asarray(kw[f])
+                if f == "direction":
+                    value = value / np.sqrt((value * value).sum(axis=1))[:, None]
+                want[row_of] = value
+            assert np.array_equal(now, want), f
+        assert np.array_equal(store.touched[-1], row_of)
+    for k, v in sent.items():
+        assert np.array_equal(given[k], v), f"the caller's {k} was written"
 
 
 def test_max_int32_id_is_fine(sched_cls):
@@ -1220,15 +1302,17 @@ UPDATE_VALUES = {
 @settings(max_examples=150, deadline=None)
 @given(data=st.data())
 def test_update_runs_only_the_rules_of_given_fields(data):
-    """An update checks only the rules that read a given field (LightStore.validate); the
-    stored rows passed them all, so the outcome equals running every rule on the merged
-    rows: the same first error (field, index, message), or the same columns."""
-    from lightsched.scene import LightStore
+    """An update checks only the rules that read a given field (LightStore.validate), on
+    the stored rows as update_lights gives them (read when a rule does); the stored rows
+    passed them all, so the outcome equals running every rule on the merged rows: the
+    same first error (field, index, message), or the same columns."""
+    from lightsched.scene import LightStore, _StoredRows
 
     s = ls.Scheduler()
     s.set_lights(**light_kwargs())
     rows = data.draw(st.lists(st.integers(0, N_L - 1), min_size=1, max_size=N_L, unique=True))
-    base = s.lights.columns(np.array(rows))
+    stored = s.lights.columns(np.array(rows))
+    base = _StoredRows(s.lights, np.array(rows), LIGHT_FIELDS)
     n = len(rows)
     names = data.draw(st.lists(st.sampled_from(sorted(UPDATE_VALUES)), min_size=1, unique=True))
     given_fields = {}
@@ -1246,7 +1330,7 @@ def test_update_runs_only_the_rules_of_given_fields(data):
             return ("error", (e.field, e.index, e.message))
 
     got = outcome(dict(given_fields), base)
-    want = outcome({**base, **given_fields}, None)
+    want = outcome({**stored, **given_fields}, None)
     assert got[0] == want[0], (got, want)
     if got[0] == "error":
         assert got[1] == want[1]
@@ -1258,3 +1342,54 @@ def test_update_runs_only_the_rules_of_given_fields(data):
         else:
             np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
             assert got[1][f].dtype == want[1][f].dtype, f
+
+
+# Values each object field may get in an update (bounds around the stored ones).
+OBJECT_UPDATE_VALUES = {
+    "bounds_min": [NAN, -INF, -60.0, 0.0, 60.0],
+    "bounds_max": [NAN, INF, -60.0, 0.0, 60.0],
+    "casts_shadows": [0, 1, 2],
+    "mask": [-1, 0, 5, UINT32_ALL, UINT32_ALL + 1],
+    "static": [0, 1, 2],
+}
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data())
+def test_object_update_runs_only_the_rules_of_given_fields(data):
+    """ObjectStore.validate in an update, as the light test above: only the rules reading
+    a given field run (the bounds order, the mask range), with the same outcome as every
+    rule on the merged rows."""
+    from lightsched.scene import ObjectStore, _StoredRows
+
+    s = ls.Scheduler()
+    s.set_objects(**object_kwargs())
+    rows = data.draw(st.lists(st.integers(0, N_O - 1), min_size=1, max_size=N_O, unique=True))
+    stored = {f: getattr(s.objects, f)[rows] for f in OBJECT_FIELDS}
+    base = _StoredRows(s.objects, np.array(rows), OBJECT_FIELDS)
+    n = len(rows)
+    names = data.draw(st.lists(st.sampled_from(sorted(OBJECT_UPDATE_VALUES)), min_size=1,
+                               unique=True))
+    given_fields = {}
+    for name in names:
+        width = 3 if name.startswith("bounds") else 0
+        cells = data.draw(st.lists(st.sampled_from(OBJECT_UPDATE_VALUES[name]),
+                                   min_size=n * max(width, 1), max_size=n * max(width, 1)))
+        a = np.array(cells)
+        given_fields[name] = a.reshape(n, width) if width else a
+
+    def outcome(given: dict, rows_base: dict | None) -> tuple:
+        try:
+            return ("ok", ObjectStore.validate(given, rows_base, n))
+        except ValidationError as e:
+            return ("error", (e.field, e.index, e.message))
+
+    got = outcome(dict(given_fields), base)
+    want = outcome({**stored, **given_fields}, None)
+    assert got[0] == want[0], (got, want)
+    if got[0] == "error":
+        assert got[1] == want[1]
+        return
+    for f in OBJECT_FIELDS:
+        np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
+        assert got[1][f].dtype == want[1][f].dtype, f
