@@ -531,8 +531,8 @@ class Scheduler(SceneAPI):
             fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
             left_rows = np.flatnonzero(c.vis_o & ~vis_o)
         if n and np.count_nonzero(vis_o) >= EVERY_OBJECT_SHARE * n:
-            grid, grid_kept = self._every_grid(c, vis_o, orows, packed, compete, is_dir,
-                                               rec_frame)
+            grid, grid_kept = self._every_grid(c, same_origin, vis_o, orows, packed, compete,
+                                               is_dir, rec_frame)
         elif full and objects_kept and c.grid.shown is None:
             # The lights set the cell edge: the kept grid serves while it is the same.
             shape = _grid_shape(int(np.count_nonzero(vis_o)), box, packed, compete, is_dir,
@@ -934,11 +934,11 @@ class Scheduler(SceneAPI):
         assert c is not None
         return {name: getattr(c.frame, name).copy() for name in _OUT}, None
 
-    def _every_grid(self, c: _Cache | None, vis_o: np.ndarray, orows: Any,
+    def _every_grid(self, c: _Cache | None, same_origin: bool, vis_o: np.ndarray, orows: Any,
                     packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                     is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> tuple[_Grid, bool]:
         """The grid of every object, and whether it was kept: the last frame's serves while
-        the records' origin is the same, its cell edge is within CELL_SLACK of the one the
+        the records' origin is the same (``same_origin``), its cell edge is within CELL_SLACK of the one the
         lights ask for, and every object that changed (``orows``) still lies where the
         grid's walks look for its record (pairs.move_records, which rewrites those records
         in place); then the records of the objects whose visibility changed get their mask
@@ -946,7 +946,7 @@ class Scheduler(SceneAPI):
         objs = self.objects
         n = len(objs)
         kept = (c is not None and c.grid.shown is not None and orows is not None
-                and _same_point(frame[0], c.origin))
+                and same_origin)
         moved = "the objects did not change"
         if kept and orows.size:
             g = c.grid
