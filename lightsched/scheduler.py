@@ -98,7 +98,16 @@ from .priority import (
     pack_parts,
 )
 from .scene import DIRECTIONAL, LIGHT_FIELDS, OBJECT_FIELDS, Camera, Config, SceneAPI
-from .shadows import culling_volumes, hidden_near, rank_shadow_lights, sweep_casters
+from .shadows import (
+    SWEEP_GROUP,
+    culling_volumes,
+    group_boxes,
+    hidden_near,
+    rank_shadow_lights,
+    sweep_casters,
+    sweep_groups,
+    widen_group_boxes,
+)
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -200,6 +209,10 @@ class _Grid:
     # (competing lights, the bytes of their radii, how many compete) when the cell edge of
     # a grid of every object was last checked against the lights' (Scheduler._every_grid).
     edge_of: tuple[np.ndarray, bytes, int] | None = None
+    # A grid of every object: the boxes round each SWEEP_GROUP of its positions' objects
+    # (shadows.group_boxes), made at the first sweep of a directional light's casters and
+    # kept with the grid, widened in place for the objects that move within it.
+    group_box: np.ndarray | None = None
 
 
 @dataclass
@@ -953,6 +966,9 @@ class Scheduler(SceneAPI):
             kept = move_records(objs.bounds_min, objs.bounds_max, orows,
                                 np.where(vis_o[orows], objs.mask[orows], 0), g.grid,
                                 g.vis[:2], g.pos_of, frame)
+            if kept and g.group_box is not None:
+                widen_group_boxes(g.group_box, objs.bounds_min, objs.bounds_max, orows,
+                                  g.pos_of, SWEEP_GROUP)
             moved = f"{orows.size} changed objects' records rewritten in place"
 
         def every_box() -> np.ndarray:
@@ -999,7 +1015,7 @@ class Scheduler(SceneAPI):
                 g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
             plan = g.plan.split(" (kept", 1)[0] + (
                 f" (kept: {moved}; {rows.size} records' visibility updated)")
-            return _Grid(g.grid, g.vis, plan, vis_o, g.pos_of, box, edge_of), True
+            return _Grid(g.grid, g.vis, plan, vis_o, g.pos_of, box, edge_of, g.group_box), True
         assert shape is not None
         g_f, dims, plan = shape
         out = self._scratch("records", 8 * n, np.float32 if frame[1] else np.float64)
@@ -1285,14 +1301,32 @@ class Scheduler(SceneAPI):
             patched = [] if patch is None else [i for i in sun if not patch[1][todo[i]]]
             sun = [i for i in sun if i not in patched]
             if sun:
-                bits = sweep_casters(lo, hi, casts, objs.mask,
-                                     lights.mask[rows_t[sun]].astype(np.int64),
-                                     (vn[sun], vq[sun], vm[sun], shared[sun]))
-                for i, t in enumerate(sun):
-                    rows = np.flatnonzero(bits[i])
-                    found[todo[t]] = (rows, bits[i][rows])
-                plan.append(f"{len(sun)} directional: every object against "
-                            f"{vm.shape[1]} cascade sweeps")
+                lmask = lights.mask[rows_t[sun]].astype(np.int64)
+                sun_vols = (vn[sun], vq[sun], vm[sun], shared[sun])
+                if grid.shown is not None:
+                    # A grid of every object: its group boxes first. Its records hold the
+                    # world boxes in exact precision (origin 0, float64), in grid order;
+                    # "fast" ones are rounded, so the stores' boxes are read by row.
+                    boxes = ((lo, hi, grid.vis[2], True) if frame[1] else
+                             (grid.vis[0][:, :3], grid.vis[0][:, 3:6], grid.vis[2], False))
+                    if grid.group_box is None:
+                        grid.group_box = group_boxes(boxes, SWEEP_GROUP)
+                    at, rows, masks = sweep_groups(casts, objs.mask, lmask, sun_vols, boxes,
+                                                   grid.group_box)
+                    spans = list(zip(at[:-1].tolist(), at[1:].tolist(), strict=True))
+                    for i, t in enumerate(sun):
+                        a, b = spans[i]
+                        found[todo[t]] = (rows[a:b], masks[a:b])
+                    plan.append(f"{len(sun)} directional: the boxes of {SWEEP_GROUP} grid "
+                                f"positions' objects, then the objects of those in a volume, "
+                                f"against {vm.shape[1]} cascade sweeps")
+                else:
+                    bits = sweep_casters(lo, hi, casts, objs.mask, lmask, sun_vols)
+                    for i, t in enumerate(sun):
+                        rows = np.flatnonzero(bits[i])
+                        found[todo[t]] = (rows, bits[i][rows])
+                    plan.append(f"{len(sun)} directional: every object against "
+                                f"{vm.shape[1]} cascade sweeps")
             if patched:
                 assert patch is not None and cached is not None
                 rows_p = patch[0]

@@ -36,6 +36,10 @@ MIN_TIER, MAX_TIER = 256, 4096
 MAX_PLANES = 18  # a convex volume here has at most 6 faces plus 12 edge planes
 SWEEP_BLOCK = 512  # boxes per block of sweep_casters: its [6, 512] float64 columns fit L1
 SWEEP_PARTS = 64  # sweep_casters' parallel parts, each a run of blocks
+# Grid positions per group box of the sweep over a grid of every object (sweep_groups): a
+# group is a run of neighbouring cells' objects, and a box round them that a volume's
+# plane rejects rejects each of them.
+SWEEP_GROUP = 64
 
 # The 12 edges of a frustum: (face a, face b, corner c0, corner c1), faces 0 near, 1 far,
 # 2 left, 3 right, 4 bottom, 5 top; corner z*4 + x*2 + y (z 0 near / 1 far, x 0 left /
@@ -497,6 +501,166 @@ def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
                     for r in range(m):
                         acc[r] |= np.uint32(inside[r]) << b
         bits[t, o0:o0 + m] = acc
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def group_boxes(at, size):
+    """Per group of ``size`` consecutive grid positions (parallel): the box round every
+    box of the group, [G, 6] (min lo, max hi), from the boxes themselves (float64), so it
+    holds each of them exactly. at = (lo, hi, rows, by_row): position v's box is row
+    rows[v] of lo and hi if by_row, else row v (a grid's float64 records, which hold the
+    world boxes in exact precision, read in order)."""
+    lo, hi, rows, by_row = at
+    n = rows.shape[0]
+    n_g = (n + size - 1) // size
+    out = np.empty((n_g, 6))
+    for g in nb.prange(n_g):
+        for a in range(3):
+            out[g, a] = np.inf
+            out[g, 3 + a] = -np.inf
+        for v in range(g * size, min(n, (g + 1) * size)):
+            p = rows[v] if by_row else v
+            for a in range(3):
+                if lo[p, a] < out[g, a]:
+                    out[g, a] = lo[p, a]
+                if hi[p, a] > out[g, 3 + a]:
+                    out[g, 3 + a] = hi[p, a]
+    return out
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def widen_group_boxes(boxes, lo, hi, rows, pos_of, size):
+    """The group boxes of the objects ``rows``, which moved within a kept grid, widened
+    to hold their new boxes too (the old ones stay inside: a group box only has to hold
+    its objects, and it is made tight again with the grid)."""
+    for i in range(rows.shape[0]):
+        o = rows[i]
+        g = pos_of[o] // size
+        for a in range(3):
+            if lo[o, a] < boxes[g, a]:
+                boxes[g, a] = lo[o, a]
+            if hi[o, a] > boxes[g, 3 + a]:
+                boxes[g, 3 + a] = hi[o, a]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v, first):
+    """Bits of the volumes of camera k that box v of [lo, hi] is in: the camera's shared
+    planes (kept in its first volume), then each cascade's own, by ``_plane_ok``. With
+    ``first``, only whether it is in any (the lowest such bit)."""
+    b0 = k * n_casc
+    for i in range(shared[t, k]):
+        if not _plane_ok(vn, vq, t, b0, i, lo, hi, v):
+            return np.uint32(0)
+    acc = np.uint32(0)
+    for c in range(n_casc):
+        b = b0 + c
+        ok = True
+        for i in range(shared[t, k], vm[t, b]):
+            if not _plane_ok(vn, vq, t, b, i, lo, hi, v):
+                ok = False
+                break
+        if ok:
+            acc |= np.uint32(1) << np.uint32(b)
+            if first:
+                return acc
+    return acc
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def sweep_groups(casts, omask, lmask, vols, at, gbox):
+    """sweep_casters' caster masks over a grid of every object, a group box at a time: a
+    group of SWEEP_GROUP grid positions whose box ``gbox`` (group_boxes) is in none of a
+    light's volumes holds no caster of it and is skipped; the boxes of the others take the
+    test one by one. at = (lo, hi, rows, by_row) as in group_boxes (rows: the object row of
+    each position). Returns (offsets [T + 1], object rows, caster masks): light t's casters
+    at offsets[t]..offsets[t+1]-1, rows ascending, the nonzero entries of sweep_casters'.
+
+    Exact, not approximate: each plane test is the same float64 expression at the box
+    corner farthest along the normal, and every operation in it (a difference, a product
+    by the normal's component, a sum) is rounded monotonically, so a corner of the group
+    box that lies further along the normal than each of its objects' corners gives a
+    signed distance at least theirs: a plane the group box fails, each of them fails
+    (bench/RESULTS.md, issue 6). Groups go to the parallel parts in turn (g = part, part +
+    SWEEP_PARTS, ...): the few a shadow distance keeps lie together in the grid."""
+    vn, vq, vm, shared = vols
+    lo, hi, rows, by_row = at
+    n_t = lmask.shape[0]
+    n_cam = shared.shape[1]
+    n_casc = vm.shape[1] // n_cam
+    n_g = gbox.shape[0]
+    nv = rows.shape[0]
+    n_parts = max(1, min(n_g, SWEEP_PARTS))
+    # Each position's mask, written for the groups let through only; counted per part,
+    # then gathered at the places the counts give (the output does not depend on the
+    # threads).
+    bits = np.empty((n_t, nv), np.uint32)
+    through = np.zeros((n_t, n_g), np.bool_)
+    count = np.zeros((n_t, n_parts + 1), np.int64)
+    g_lo, g_hi = gbox[:, :3], gbox[:, 3:]
+    for part in nb.prange(n_parts):
+        for t in range(n_t):
+            c = 0
+            for g in range(part, n_g, n_parts):
+                hit = np.uint32(0)
+                for k in range(n_cam):
+                    if hit == 0:
+                        hit = _in_sweep(vn, vq, vm, shared, t, k, n_casc, g_lo, g_hi, g, True)
+                if hit == 0:
+                    continue
+                through[t, g] = True
+                for v in range(g * SWEEP_GROUP, min(nv, (g + 1) * SWEEP_GROUP)):
+                    p = rows[v] if by_row else v
+                    acc = np.uint32(0)
+                    for k in range(n_cam):
+                        acc |= _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, p, False)
+                    if acc != 0:
+                        o = rows[v]
+                        if not casts[o] or (np.int64(omask[o]) & lmask[t]) == 0:
+                            acc = np.uint32(0)
+                    bits[t, v] = acc
+                    c += acc != 0
+            count[t, part + 1] = c
+    offsets = np.zeros(n_t + 1, np.int64)
+    for t in range(n_t):
+        for part in range(n_parts):
+            count[t, part + 1] += count[t, part]
+        offsets[t + 1] = offsets[t] + count[t, n_parts]
+    out_rows = np.empty(offsets[n_t], np.int64)
+    masks = np.empty(offsets[n_t], np.uint32)
+    for part in nb.prange(n_parts):
+        for t in range(n_t):
+            d = offsets[t] + count[t, part]
+            for g in range(part, n_g, n_parts):
+                if not through[t, g]:
+                    continue
+                for v in range(g * SWEEP_GROUP, min(nv, (g + 1) * SWEEP_GROUP)):
+                    if bits[t, v] != 0:
+                        out_rows[d] = rows[v]
+                        masks[d] = bits[t, v]
+                        d += 1
+    # Grid order to row order, light by light: a sort of the casters when they are few
+    # beside the objects, else their masks spread over a row-indexed array and read back.
+    n = casts.shape[0]
+    for t in range(n_t):
+        a, b = offsets[t], offsets[t + 1]
+        if (b - a) * 16 <= n:
+            order = np.argsort(out_rows[a:b])
+            r = out_rows[a:b][order]
+            m = masks[a:b][order]
+            out_rows[a:b] = r
+            masks[a:b] = m
+        else:
+            spread = np.zeros(n, np.uint32)
+            for i in range(a, b):
+                spread[out_rows[i]] = masks[i]
+            d = a
+            for o in range(n):
+                if spread[o] != 0:
+                    out_rows[d] = o
+                    masks[d] = spread[o]
+                    d += 1
+    return offsets, out_rows, masks
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")

@@ -23,7 +23,15 @@ from hypothesis import strategies as st
 
 import lightsched as ls
 import lightsched.reference as ref
-from lightsched.shadows import MAX_PLANES, SWEEP_BLOCK, sweep_casters
+from lightsched.shadows import (
+    MAX_PLANES,
+    SWEEP_BLOCK,
+    SWEEP_GROUP,
+    group_boxes,
+    sweep_casters,
+    sweep_groups,
+    widen_group_boxes,
+)
 
 # Each test runs with both kinds of object grid of the fast path (conftest.py).
 pytestmark = pytest.mark.usefixtures("grid_kind")
@@ -367,15 +375,10 @@ def sweep_bits_by_numpy(lo, hi, casts, omask, lmask, vols):
     return bits
 
 
-@examples(0.2)
-@given(seed=st.integers(0, 2**32 - 1))
-def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
-    """shadows.sweep_casters on random convex plane sets (2 lights x 2 cameras x 2
-    cascades, 1-3 shared planes, 3-8 own) and ~40k boxes, against the test written out
-    in numpy. The boxes come in runs: whole blocks far outside one plane (the block is
-    emptied and that plane is tried first in the part's next blocks), then blocks near the
-    volumes, so a plane the carried order skipped would show."""
-    rng = np.random.default_rng(seed)
+def random_volumes(rng: np.random.Generator, reach: tuple[float, float] = (0.3, 1.5)
+                   ) -> tuple[np.ndarray, ...]:
+    """Random convex plane sets in culling_volumes' layout: 2 lights x 2 cameras x 2
+    cascades, 1-3 shared planes (kept in each camera's first volume), 3-8 own."""
     n_t, n_cam, n_casc = 2, 2, 2
     n_vol = n_cam * n_casc
     vn = np.zeros((n_t, n_vol, MAX_PLANES, 3))
@@ -387,11 +390,24 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
             vm[t, b] += shared[t, b // n_casc]
             m = vm[t, b]
             normals = rng.normal(size=(m, 3))
-            # Planes through points around the unit ball, facing inwards: a convex volume
-            # around the origin that holds some of the boxes below.
+            # Planes through points around a ball, facing inwards: a convex volume around
+            # the origin that holds some of the boxes.
             vn[t, b, :m] = normals
             vq[t, b, :m] = -normals / np.linalg.norm(normals, axis=1)[:, None] * rng.uniform(
-                0.3, 1.5, (m, 1))
+                *reach, (m, 1))
+    return vn, vq, vm, shared
+
+
+@examples(0.2)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
+    """shadows.sweep_casters on random convex plane sets (2 lights x 2 cameras x 2
+    cascades, 1-3 shared planes, 3-8 own) and ~40k boxes, against the test written out
+    in numpy. The boxes come in runs: whole blocks far outside one plane (the block is
+    emptied and that plane is tried first in the part's next blocks), then blocks near the
+    volumes, so a plane the carried order skipped would show."""
+    rng = np.random.default_rng(seed)
+    vn, vq, vm, shared = random_volumes(rng)
     n = 80 * SWEEP_BLOCK
     centre = rng.uniform(-2.0, 2.0, (n, 3))
     for blk in np.flatnonzero(rng.random(n // SWEEP_BLOCK) < 0.4):
@@ -408,3 +424,68 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
     want = sweep_bits_by_numpy(lo, hi, casts, omask, lmask, vols)
     assert np.count_nonzero(want) > 100
     assert np.array_equal(got, want)
+
+
+def by_row_or_grid(lo: np.ndarray, hi: np.ndarray, grid_rows: np.ndarray, by_row: bool
+                   ) -> tuple:
+    """sweep_groups' boxes: the objects' by row, or (as a grid's float64 records hold
+    them) copied into grid order, as views of one [V, 8] array."""
+    if by_row:
+        return lo, hi, grid_rows, True
+    recs = np.zeros((grid_rows.size, 8))
+    recs[:, :3] = lo[grid_rows]
+    recs[:, 3:6] = hi[grid_rows]
+    return recs[:, :3], recs[:, 3:6], grid_rows, False
+
+
+@examples(0.2)
+@given(seed=st.integers(0, 2**32 - 1), order=st.sampled_from(["cells", "random"]),
+       reach=st.sampled_from([(0.05, 0.4), (0.3, 1.5), (3.0, 6.0)]))
+def test_sweep_groups_equals_the_plane_test_box_by_box(seed, order, reach):
+    """shadows.sweep_groups (the group boxes of a grid's positions tested first) against
+    the test written out in numpy, box by box: the same casters, rows ascending, the same
+    masks. Grid positions in cells (coherent groups, most of them rejected whole, some
+    across a plane) or in random order (a group box spans everything); volumes that hold a
+    few of the boxes (casters sorted into row order), a third or most of them (spread over
+    the rows instead). Boxes read by object row ("fast" precision) or from records in
+    grid order (exact). Then a quarter of the objects move, their group boxes widened in
+    place (widen_group_boxes), and the sweep is the same again."""
+    rng = np.random.default_rng(seed)
+    vols = random_volumes(rng, reach)
+    n = 20_000
+    centre = rng.uniform(-4.0, 4.0, (n, 3))
+    half = rng.uniform(0.0, 0.3, (n, 3))
+    lo, hi = centre - half, centre + half
+    casts = rng.random(n) < 0.9
+    omask = rng.choice(np.array([1, 2, 3], np.uint32), n)
+    lmask = np.array([1, 2], np.int64)
+    if order == "cells":
+        cell = np.floor(centre / 0.5).astype(np.int64) + 8
+        grid_rows = np.argsort((cell[:, 0] * 17 + cell[:, 1]) * 17 + cell[:, 2], kind="stable")
+    else:
+        grid_rows = rng.permutation(n)
+    pos_of = np.empty(n, np.int64)
+    pos_of[grid_rows] = np.arange(n)
+    by_row = rng.random() < 0.5  # boxes by object row, or copied into grid order
+    boxes = group_boxes(by_row_or_grid(lo, hi, grid_rows, by_row), SWEEP_GROUP)
+
+    def check() -> int:
+        at, rows, masks = sweep_groups(casts, omask, lmask, vols,
+                                       by_row_or_grid(lo, hi, grid_rows, by_row), boxes)
+        want = sweep_bits_by_numpy(lo, hi, casts, omask, lmask, vols)
+        for t in range(lmask.size):
+            keep = np.flatnonzero(want[t])
+            assert np.array_equal(rows[at[t]:at[t + 1]], keep), t
+            assert np.array_equal(masks[at[t]:at[t + 1]], want[t][keep]), t
+        assert at[-1] == rows.size == masks.size
+        return int(at[-1])
+
+    found = check()
+    assert 0 < found < 2 * n
+    moved = rng.choice(n, n // 4, replace=False)
+    step = rng.normal(0.0, 1.0, (moved.size, 3))
+    lo, hi = lo.copy(), hi.copy()
+    lo[moved] += step
+    hi[moved] += step
+    widen_group_boxes(boxes, lo, hi, moved, pos_of, SWEEP_GROUP)
+    check()
