@@ -1268,7 +1268,8 @@ class Scheduler(SceneAPI):
                  ) -> tuple[tuple[np.ndarray, ...], dict[int, tuple[np.ndarray, np.ndarray]], str]:
         """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
         per-light lists to keep, and the plan: directional lights scan every object against
-        their cascade sweeps; point and spot lights walk the light pass's grid, and when it
+        their cascade sweeps (over a grid of every object, boxes round SWEEP_GROUP of its
+        positions' objects first); point and spot lights walk the light pass's grid, and when it
         holds the visible objects only, a grid of the same kind over the invisible casting
         objects that meet their spheres' bounding box (objects need not be visible to
         cast). Lights with ``recompute`` False take their lists from ``cached``. ``patch``

@@ -11,7 +11,8 @@ Where the fused copies live: slot_shadow's rule (``pick_slot_shadows``) is inlin
 pairs.object_pass; the caster test of a point or spot light (``caster_bits``) runs inside
 pairs.grid_casters, which walks the same object grids as the light pass; directional
 casters are a parallel scan over every object (``sweep_casters``), since their influence
-volume is everything.
+volume is everything, or, over a grid of every object, over boxes round runs of its
+positions first (``sweep_groups``): a shadow distance keeps few of them.
 
 Volumes are convex plane sets (normal, point) [.., MAX_PLANES, 3] with a plane count; the
 normals of the added edge planes are not normalised (the AABB test needs only the sign).

@@ -314,11 +314,13 @@ def test_never_missed_on_random_scenes():
 @examples(0.04)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
-    """The sun's sweep (shadows.sweep_casters) at a scale where each of its parallel parts
-    scans 2-3 blocks of boxes: ~70k boxes over a town, two cameras looking at it, a slanted
-    sun with a shadow distance that keeps a fraction of them (955 to 20k casters over 63
-    seeds), some objects not casting or masked out; equal to the oracle's frame. The plane
-    order a part carries from block to block is checked below, on plane sets built to
+    """The sun's sweep at scale: ~70k boxes over a town, two cameras looking at it, a
+    slanted sun with a shadow distance that keeps a fraction of them (955 to 20k casters
+    over 63 seeds), some objects not casting or masked out; equal to the oracle's frame.
+    The cameras see over half of the objects, so the frame keeps a grid of every object
+    and sweeps its group boxes first (shadows.sweep_groups; ~1100 groups). The flat sweep
+    (sweep_casters, each of its parallel parts scanning 2-3 blocks here) and the plane
+    order a part carries from block to block are checked below, on plane sets built to
     empty whole blocks."""
     rng = np.random.default_rng(seed)
     n = 70_000
