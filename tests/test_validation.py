@@ -1299,33 +1299,33 @@ UPDATE_VALUES = {
 }
 
 
-@settings(max_examples=150, deadline=None)
-@given(data=st.data())
-def test_update_runs_only_the_rules_of_given_fields(data):
-    """An update checks only the rules that read a given field (LightStore.validate), on
-    the stored rows as update_lights gives them (read when a rule does); the stored rows
-    passed them all, so the outcome equals running every rule on the merged rows: the
-    same first error (field, index, message), or the same columns."""
-    from lightsched.scene import LightStore, _StoredRows
+def update_against_every_rule(data: st.DataObject, store: object, validate: object,
+                              names: tuple[str, ...], values: dict[str, list],
+                              wide: tuple[str, ...]) -> tuple[tuple, tuple, dict]:
+    """Draws rows of ``store`` and fields to give them from ``values`` (those in ``wide``
+    [n, 3]); runs ``validate`` on the stored rows as an update gives them (read when a
+    rule does) and, with every rule, on the merged rows; checks they agree on the first
+    error (field, index, message) if any. Returns both outcomes, ("ok", columns) or
+    ("error", ...), and the given fields."""
+    from lightsched.scene import _StoredRows
 
-    s = ls.Scheduler()
-    s.set_lights(**light_kwargs())
-    rows = data.draw(st.lists(st.integers(0, N_L - 1), min_size=1, max_size=N_L, unique=True))
-    stored = s.lights.columns(np.array(rows))
-    base = _StoredRows(s.lights, np.array(rows), LIGHT_FIELDS)
+    n_rows = len(store)
+    rows = data.draw(st.lists(st.integers(0, n_rows - 1), min_size=1, max_size=n_rows,
+                              unique=True))
+    stored = {f: getattr(store, f)[rows] for f in names}
+    base = _StoredRows(store, np.array(rows), names)
     n = len(rows)
-    names = data.draw(st.lists(st.sampled_from(sorted(UPDATE_VALUES)), min_size=1, unique=True))
     given_fields = {}
-    for name in names:
-        width = 3 if name in ("position", "direction") else 0
-        cells = data.draw(st.lists(st.sampled_from(UPDATE_VALUES[name]),
+    for name in data.draw(st.lists(st.sampled_from(sorted(values)), min_size=1, unique=True)):
+        width = 3 if name in wide else 0
+        cells = data.draw(st.lists(st.sampled_from(values[name]),
                                    min_size=n * max(width, 1), max_size=n * max(width, 1)))
         a = np.array(cells)
         given_fields[name] = a.reshape(n, width) if width else a
 
-    def outcome(given: dict, rows_base: dict | None) -> tuple:
+    def outcome(given: dict, rows_base: object) -> tuple:
         try:
-            return ("ok", LightStore.validate(given, rows_base, n))
+            return ("ok", validate(given, rows_base, n))
         except ValidationError as e:
             return ("error", (e.field, e.index, e.message))
 
@@ -1334,14 +1334,7 @@ def test_update_runs_only_the_rules_of_given_fields(data):
     assert got[0] == want[0], (got, want)
     if got[0] == "error":
         assert got[1] == want[1]
-        return
-    for f in LIGHT_FIELDS:
-        if f == "direction" and f not in given_fields:
-            # every rule run normalises the stored (unit) directions again: last-bit changes
-            np.testing.assert_allclose(got[1][f], want[1][f], rtol=1e-15, atol=0)
-        else:
-            np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
-            assert got[1][f].dtype == want[1][f].dtype, f
+    return got, want, given_fields
 
 
 # Values each object field may get in an update (bounds around the stored ones).
@@ -1354,42 +1347,34 @@ OBJECT_UPDATE_VALUES = {
 }
 
 
-@settings(max_examples=100, deadline=None)
+@pytest.mark.parametrize("what", ["lights", "objects"])
+@settings(max_examples=150, deadline=None)
 @given(data=st.data())
-def test_object_update_runs_only_the_rules_of_given_fields(data):
-    """ObjectStore.validate in an update, as the light test above: only the rules reading
-    a given field run (the bounds order, the mask range), with the same outcome as every
-    rule on the merged rows."""
-    from lightsched.scene import ObjectStore, _StoredRows
+def test_update_runs_only_the_rules_of_given_fields(what, data):
+    """An update checks only the rules that read a given field (LightStore.validate and
+    ObjectStore.validate: the bounds order, the mask range), on the stored rows as an
+    update gives them (read when a rule does); the stored rows passed them all, so the
+    outcome equals running every rule on the merged rows: the same first error (field,
+    index, message), or the same columns."""
+    from lightsched.scene import LightStore, ObjectStore
 
     s = ls.Scheduler()
-    s.set_objects(**object_kwargs())
-    rows = data.draw(st.lists(st.integers(0, N_O - 1), min_size=1, max_size=N_O, unique=True))
-    stored = {f: getattr(s.objects, f)[rows] for f in OBJECT_FIELDS}
-    base = _StoredRows(s.objects, np.array(rows), OBJECT_FIELDS)
-    n = len(rows)
-    names = data.draw(st.lists(st.sampled_from(sorted(OBJECT_UPDATE_VALUES)), min_size=1,
-                               unique=True))
-    given_fields = {}
-    for name in names:
-        width = 3 if name.startswith("bounds") else 0
-        cells = data.draw(st.lists(st.sampled_from(OBJECT_UPDATE_VALUES[name]),
-                                   min_size=n * max(width, 1), max_size=n * max(width, 1)))
-        a = np.array(cells)
-        given_fields[name] = a.reshape(n, width) if width else a
-
-    def outcome(given: dict, rows_base: dict | None) -> tuple:
-        try:
-            return ("ok", ObjectStore.validate(given, rows_base, n))
-        except ValidationError as e:
-            return ("error", (e.field, e.index, e.message))
-
-    got = outcome(dict(given_fields), base)
-    want = outcome({**stored, **given_fields}, None)
-    assert got[0] == want[0], (got, want)
+    if what == "lights":
+        s.set_lights(**light_kwargs())
+        got, want, given_fields = update_against_every_rule(
+            data, s.lights, LightStore.validate, LIGHT_FIELDS, UPDATE_VALUES,
+            ("position", "direction"))
+    else:
+        s.set_objects(**object_kwargs())
+        got, want, given_fields = update_against_every_rule(
+            data, s.objects, ObjectStore.validate, OBJECT_FIELDS, OBJECT_UPDATE_VALUES,
+            ("bounds_min", "bounds_max"))
     if got[0] == "error":
-        assert got[1] == want[1]
         return
-    for f in OBJECT_FIELDS:
-        np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
-        assert got[1][f].dtype == want[1][f].dtype, f
+    for f in want[1]:  # every field (the update's columns read the others on demand)
+        if f == "direction" and f not in given_fields:
+            # every rule run normalises the stored (unit) directions again: last-bit changes
+            np.testing.assert_allclose(got[1][f], want[1][f], rtol=1e-15, atol=0)
+        else:
+            np.testing.assert_array_equal(got[1][f], want[1][f], err_msg=f)
+            assert got[1][f].dtype == want[1][f].dtype, f
