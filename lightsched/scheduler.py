@@ -951,11 +951,11 @@ class Scheduler(SceneAPI):
                     packed: tuple[np.ndarray, np.ndarray], compete: np.ndarray,
                     is_dir: np.ndarray, frame: tuple[np.ndarray, bool]) -> tuple[_Grid, bool]:
         """The grid of every object, and whether it was kept: the last frame's serves while
-        the records' origin is the same (``same_origin``), its cell edge is within CELL_SLACK of the one the
-        lights ask for, and every object that changed (``orows``) still lies where the
-        grid's walks look for its record (pairs.move_records, which rewrites those records
-        in place); then the records of the objects whose visibility changed get their mask
-        (or 0) again."""
+        the records' origin is the same (``same_origin``), its cell edge is within
+        CELL_SLACK of the one the lights ask for, and every object that changed (``orows``)
+        still lies where the grid's walks look for its record (pairs.move_records, which
+        rewrites those records in place); then the records of the objects whose visibility
+        changed get their mask (or 0) again."""
         objs = self.objects
         n = len(objs)
         kept = (c is not None and c.grid.shown is not None and orows is not None
@@ -968,7 +968,7 @@ class Scheduler(SceneAPI):
                                 g.vis[:2], g.pos_of, frame)
             if kept and g.group_box is not None:
                 widen_group_boxes(g.group_box, objs.bounds_min, objs.bounds_max, orows,
-                                  g.pos_of, SWEEP_GROUP)
+                                  g.pos_of)
             moved = f"{orows.size} changed objects' records rewritten in place"
 
         def every_box() -> np.ndarray:
@@ -1269,10 +1269,10 @@ class Scheduler(SceneAPI):
         """(caster_offsets, caster_ids, caster_masks) of the shadow lights in rank order, the
         per-light lists to keep, and the plan: directional lights scan every object against
         their cascade sweeps (over a grid of every object, boxes round SWEEP_GROUP of its
-        positions' objects first); point and spot lights walk the light pass's grid, and when it
-        holds the visible objects only, a grid of the same kind over the invisible casting
-        objects that meet their spheres' bounding box (objects need not be visible to
-        cast). Lights with ``recompute`` False take their lists from ``cached``. ``patch``
+        positions' objects first); point and spot lights walk the light pass's grid, and
+        when it holds the visible objects only, a grid of the same kind over the invisible
+        casting objects that meet their spheres' bounding box (objects need not be visible
+        to cast). Lights with ``recompute`` False take their lists from ``cached``. ``patch``
         = (the object rows that changed, per shadow light whether it or the cameras did):
         a directional light that did not keeps its cached list but at those rows, which
         alone it sweeps (the sun's sweep of 100k objects took ~0.6 ms)."""
@@ -1311,7 +1311,7 @@ class Scheduler(SceneAPI):
                     boxes = ((lo, hi, grid.vis[2], True) if frame[1] else
                              (grid.vis[0][:, :3], grid.vis[0][:, 3:6], grid.vis[2], False))
                     if grid.group_box is None:
-                        grid.group_box = group_boxes(boxes, SWEEP_GROUP)
+                        grid.group_box = group_boxes(boxes)
                     at, rows, masks = sweep_groups(casts, objs.mask, lmask, sun_vols, boxes,
                                                    grid.group_box)
                     spans = list(zip(at[:-1].tolist(), at[1:].tolist(), strict=True))

@@ -505,21 +505,21 @@ def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def group_boxes(at, size):
-    """Per group of ``size`` consecutive grid positions (parallel): the box round every
+def group_boxes(at):
+    """Per group of SWEEP_GROUP consecutive grid positions (parallel): the box round every
     box of the group, [G, 6] (min lo, max hi), from the boxes themselves (float64), so it
     holds each of them exactly. at = (lo, hi, rows, by_row): position v's box is row
     rows[v] of lo and hi if by_row, else row v (a grid's float64 records, which hold the
     world boxes in exact precision, read in order)."""
     lo, hi, rows, by_row = at
     n = rows.shape[0]
-    n_g = (n + size - 1) // size
+    n_g = (n + SWEEP_GROUP - 1) // SWEEP_GROUP
     out = np.empty((n_g, 6))
     for g in nb.prange(n_g):
         for a in range(3):
             out[g, a] = np.inf
             out[g, 3 + a] = -np.inf
-        for v in range(g * size, min(n, (g + 1) * size)):
+        for v in range(g * SWEEP_GROUP, min(n, (g + 1) * SWEEP_GROUP)):
             p = rows[v] if by_row else v
             for a in range(3):
                 if lo[p, a] < out[g, a]:
@@ -530,13 +530,13 @@ def group_boxes(at, size):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def widen_group_boxes(boxes, lo, hi, rows, pos_of, size):
+def widen_group_boxes(boxes, lo, hi, rows, pos_of):
     """The group boxes of the objects ``rows``, which moved within a kept grid, widened
     to hold their new boxes too (the old ones stay inside: a group box only has to hold
     its objects, and it is made tight again with the grid)."""
     for i in range(rows.shape[0]):
         o = rows[i]
-        g = pos_of[o] // size
+        g = pos_of[o] // SWEEP_GROUP
         for a in range(3):
             if lo[o, a] < boxes[g, a]:
                 boxes[g, a] = lo[o, a]

@@ -26,7 +26,6 @@ import lightsched.reference as ref
 from lightsched.shadows import (
     MAX_PLANES,
     SWEEP_BLOCK,
-    SWEEP_GROUP,
     group_boxes,
     sweep_casters,
     sweep_groups,
@@ -469,7 +468,7 @@ def test_sweep_groups_equals_the_plane_test_box_by_box(seed, order, reach):
     pos_of = np.empty(n, np.int64)
     pos_of[grid_rows] = np.arange(n)
     by_row = rng.random() < 0.5  # boxes by object row, or copied into grid order
-    boxes = group_boxes(by_row_or_grid(lo, hi, grid_rows, by_row), SWEEP_GROUP)
+    boxes = group_boxes(by_row_or_grid(lo, hi, grid_rows, by_row))
 
     def check() -> int:
         at, rows, masks = sweep_groups(casts, omask, lmask, vols,
@@ -489,5 +488,5 @@ def test_sweep_groups_equals_the_plane_test_box_by_box(seed, order, reach):
     lo, hi = lo.copy(), hi.copy()
     lo[moved] += step
     hi[moved] += step
-    widen_group_boxes(boxes, lo, hi, moved, pos_of, SWEEP_GROUP)
+    widen_group_boxes(boxes, lo, hi, moved, pos_of)
     check()
