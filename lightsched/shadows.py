@@ -582,8 +582,8 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
     by the normal's component, a sum) is rounded monotonically, so a corner of the group
     box that lies further along the normal than each of its objects' corners gives a
     signed distance at least theirs: a plane the group box fails, each of them fails
-    (bench/RESULTS.md, issue 6). Groups go to the parallel parts in turn (g = part, part +
-    SWEEP_PARTS, ...): the few a shadow distance keeps lie together in the grid."""
+    (bench/RESULTS.md, issue 6). Groups go to the parallel parts in turn (part p takes
+    groups p, p + parts, ...): the few a shadow distance keeps lie together in the grid."""
     vn, vq, vm, shared = vols
     lo, hi, rows, by_row = at
     n_t = lmask.shape[0]
