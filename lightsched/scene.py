@@ -656,9 +656,6 @@ class ObjectStore:
     def __len__(self) -> int:
         return int(self.id.size)
 
-    def columns(self, rows: np.ndarray | slice = slice(None)) -> dict[str, np.ndarray]:
-        return {f: getattr(self, f)[rows].copy() for f in OBJECT_FIELDS}
-
     def add_state(self, name: str, tail: tuple[int, ...], dtype: Any, fill: Any) -> None:
         self.state[name] = (np.full((len(self),) + tail, fill, dtype=dtype), fill)
 

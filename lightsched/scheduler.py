@@ -1314,10 +1314,9 @@ class Scheduler(SceneAPI):
                         grid.group_box = group_boxes(boxes)
                     at, rows, masks = sweep_groups(casts, objs.mask, lmask, sun_vols, boxes,
                                                    grid.group_box)
-                    spans = list(zip(at[:-1].tolist(), at[1:].tolist(), strict=True))
+                    at = at.tolist()
                     for i, t in enumerate(sun):
-                        a, b = spans[i]
-                        found[todo[t]] = (rows[a:b], masks[a:b])
+                        found[todo[t]] = (rows[at[i]:at[i + 1]], masks[at[i]:at[i + 1]])
                     plan.append(f"{len(sun)} directional: the boxes of {SWEEP_GROUP} grid "
                                 f"positions' objects, then the objects of those in a volume, "
                                 f"against {vm.shape[1]} cascade sweeps")
