@@ -7,7 +7,7 @@ object. Pairs are plain arrays (row, P), never Python objects.
 
 The work is light-major, in four kernels:
 1. ``visible_order`` + ``visible_objects``: the objects of the grid (the visible ones, or
-   every object with the invisible ones' masks 0, scheduler.py) sorted by the grid cell of
+   every object with the invisible ones' masks hidden, ``SHOWN``) sorted by the grid cell of
    their centre (a counting sort), one record each (lo, hi, mask: 64 bytes in float64, 32
    in the "fast" precision's float32 relative to the first camera); objects larger than a
    cell go past the last cell, to a short list every light tests.
@@ -77,6 +77,7 @@ from .select import (
 from .shadows import caster_bits, pick_slot_shadows
 from .simd import (
     LANES,
+    SHOWN,
     candidate_run,
     held_row,
     point_priority,
@@ -320,8 +321,8 @@ def _record_fits(o, lo, hi, grid, v, frame):
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def move_records(lo, hi, rows, shown_mask, grid, recs, pos_of, frame):
     """The records of the moved object ``rows`` rewritten in place in a kept grid of every
-    object, as visible_objects writes them (shown_mask: per row of ``rows``, its mask, or 0
-    out of view). Every walk of the grid (_light_cells, _slab_d2, _column_run) finds an
+    object, as visible_objects writes them (shown_mask: per row of ``rows``, its record's
+    mask word, SHOWN). Every walk of the grid (_light_cells, _slab_d2, _column_run) finds an
     object by the cell its record sits in: the slab of that cell's centres widened by the
     largest half-extent ``ext`` on each axis. So a record may stay where it is while the
     object's new box lies inside that widened slab, whatever cell its centre is now in;
@@ -709,9 +710,9 @@ def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, 
     (row j, type, index t of its culling volumes) at n when it is a caster: casts_shadows,
     mask, d2 <= r*r, then shadows.caster_bits. Returns the new n. box, box_rows, lo, hi:
     the grid's records, their object rows and lo / hi views; casts, omask, w_lo, w_hi: the
-    store's casts_shadows, mask, bounds_min, bounds_max (the mask in a grid of every
-    object's records is 0 for the invisible ones, which pair with no light, but invisible
-    objects cast); vn, vq, vm: the culling volumes. The arrays come one by one: a tuple of
+    store's casts_shadows, mask, bounds_min, bounds_max (in a grid of every object the
+    records of the invisible ones hold no SHOWN bit, so they pair with no light, but
+    invisible objects cast); vn, vq, vm: the culling volumes. The arrays come one by one: a tuple of
     them unpacked once an object kept its reference counting in the walk."""
     j, typ, t = light
     o = box_rows[v]
@@ -981,11 +982,12 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
             ahead = r + PREFETCH_OBJECTS
             if far and ahead < n_rows:
                 oa = rows[ahead]
-                if bits[oa, 6] != 0:
+                if np.int64(bits[oa, 6]) & SHOWN != 0:
                     for t in range(c_seg[oa, 0], c_seg[oa, 0] + c_seg[oa, 1]):
                         prefetch_row(hot, c_j[t])
-            ob = np.int64(bits[o, 6])
-            # An object out of view (mask 0 in its record) keeps its list but pairs with none.
+            ob = np.int64(bits[o, 6]) & SHOWN
+            # An object out of view (no SHOWN bit in its record) keeps its list but pairs
+            # with none.
             a = c_seg[o, 0]
             b = a + (c_seg[o, 1] if ob != 0 else 0)
             if vector and b > a:
@@ -1063,8 +1065,8 @@ def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params
     box, bits = recs
     hot, lf = lights
     c_j, a, b = cands
-    ob = np.int64(bits[o, 6])
-    # An object out of view (mask 0 in its record) keeps its list but pairs with none.
+    ob = np.int64(bits[o, 6]) & SHOWN
+    # An object out of view (no SHOWN bit in its record) keeps its list but pairs with none.
     if ob == 0:
         b = a
     if vector and b > a:
@@ -1302,16 +1304,18 @@ def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def widen_walkers(hot, walk, positions, wide, skin_lead):
+def widen_walkers(hot, walk, positions, wide, widen):
     """The rows of the lights that walk for the candidate lists (``walk`` True per light
     row), int32 ascending, with their rows of ``wide`` written from light_hot's: the radius
-    widened by skin, every mask bit, the point type (whatever the light's type: the lists
-    hold the range test only), and the centre ahead along the light's last step by lead x
-    skin x its radius (positions = (world positions now, last frame's); a light that did
-    not move keeps its centre). skin_lead = (scheduler.SKIN, scheduler.LEAD). One loop
-    over the lights, where numpy took a dozen calls of ~1-3 us each on the walkers' rows.
+    widened by skin, the mask ``every`` (every mask bit: float(SHOWN), or -1.0 to meet the
+    hidden masks of the objects out of view too), the point type (whatever the light's
+    type: the lists hold the range test only), and the centre ahead along the light's last
+    step by lead x skin x its radius (positions = (world positions now, last frame's); a
+    light that did not move keeps its centre). widen = (scheduler.SKIN, scheduler.LEAD,
+    every). One loop over the lights, where numpy took a dozen calls of ~1-3 us each on
+    the walkers' rows.
     """
-    skin, lead = skin_lead
+    skin, lead, every = widen
     now, last = positions
     n = 0
     for j in range(walk.shape[0]):
@@ -1326,7 +1330,7 @@ def widen_walkers(hot, walk, positions, wide, skin_lead):
         for c in range(8):
             wide[j, c] = hot[j, c]
         wide[j, 3] = hot[j, 3] * (1.0 + skin)
-        wide[j, 4] = float(0xFFFFFFFF)
+        wide[j, 4] = every
         wide[j, 5] = j * 32.0
         dx = now[j, 0] - last[j, 0]
         dy = now[j, 1] - last[j, 1]

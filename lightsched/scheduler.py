@@ -108,6 +108,7 @@ from .shadows import (
     sweep_groups,
     widen_group_boxes,
 )
+from .simd import SHOWN
 
 # Below this many (competing light, visible object) pairs a grid costs more than it saves.
 BRUTE_FORCE_PAIRS = 1 << 15
@@ -196,9 +197,9 @@ class _Grid:
     """The grid of objects a frame walked: (origin and 1/h, dims, cell_start, ext, big_pos)
     and the per-position records (vis_box [V, 8], its integer view, object row per
     position). Either a grid of the visible objects (``shown`` None), or of every object
-    (``shown`` the visibility its records hold: an invisible object's record has mask 0,
-    so it pairs with no light; ``pos_of`` each row's position, ``box`` every object's
-    bounding box, which set the grid's extent)."""
+    (``shown`` the visibility its records hold: an invisible object's record has no SHOWN
+    bit of its mask word, so it pairs with no light (_shown_mask); ``pos_of`` each row's
+    position, ``box`` every object's bounding box, which set the grid's extent)."""
 
     grid: tuple
     vis: tuple
@@ -955,7 +956,7 @@ class Scheduler(SceneAPI):
         CELL_SLACK of the one the lights ask for, and every object that changed (``orows``)
         still lies where the grid's walks look for its record (pairs.move_records, which
         rewrites those records in place); then the records of the objects whose visibility
-        changed get their mask (or 0) again."""
+        changed get their mask word again (_shown_mask)."""
         objs = self.objects
         n = len(objs)
         kept = (c is not None and c.grid.shown is not None and orows is not None
@@ -964,8 +965,8 @@ class Scheduler(SceneAPI):
         if kept and orows.size:
             g = c.grid
             kept = move_records(objs.bounds_min, objs.bounds_max, orows,
-                                np.where(vis_o[orows], objs.mask[orows], 0), g.grid,
-                                g.vis[:2], g.pos_of, frame)
+                                _shown_mask(vis_o[orows], objs.mask[orows], frame[1]),
+                                g.grid, g.vis[:2], g.pos_of, frame)
             if kept and g.group_box is not None:
                 widen_group_boxes(g.group_box, objs.bounds_min, objs.bounds_max, orows,
                                   g.pos_of)
@@ -1012,15 +1013,16 @@ class Scheduler(SceneAPI):
             rows = (np.zeros(0, np.int64) if vis_o is g.shown
                     else np.flatnonzero(vis_o != g.shown))
             if rows.size:
-                g.vis[1][g.pos_of[rows], 6] = np.where(vis_o[rows], objs.mask[rows], 0)
+                g.vis[1][g.pos_of[rows], 6] = _shown_mask(vis_o[rows], objs.mask[rows],
+                                                          frame[1])
             plan = g.plan.split(" (kept", 1)[0] + (
                 f" (kept: {moved}; {rows.size} records' visibility updated)")
             return _Grid(g.grid, g.vis, plan, vis_o, g.pos_of, box, edge_of, g.group_box), True
         assert shape is not None
         g_f, dims, plan = shape
         out = self._scratch("records", 8 * n, np.float32 if frame[1] else np.float64)
-        shown_mask = np.where(vis_o, objs.mask, 0).astype(objs.mask.dtype, copy=False)
-        grid, recs, pos_of = _object_grid(objs.bounds_min, objs.bounds_max, shown_mask,
+        grid, recs, pos_of = _object_grid(objs.bounds_min, objs.bounds_max,
+                                          _shown_mask(vis_o, objs.mask, frame[1]),
                                           np.ones(n, np.bool_), g_f, dims, frame, out)
         if plan is None:
             plan = _grid_plan("every object, the invisible ones masked out", grid)
@@ -1149,13 +1151,20 @@ class Scheduler(SceneAPI):
         # sphere before it leaves it, ~(1 + LEAD) x as many frames.
         positions = (now, now if last_position is None else last_position)
 
+        exact = grid.vis[0].dtype == np.float64
+
         def walk_of(mask: np.ndarray) -> tuple[np.ndarray, ...]:
-            sel = widen_walkers(hot, mask, positions, wide, (SKIN, LEAD))
+            # Lists that hold the objects out of view: in float64 records those keep their
+            # masks in the upper half of the word, which a walker's mask of every bit of
+            # the word meets (SHOWN).
+            every = -1.0 if hold and exact else float(SHOWN)
+            sel = widen_walkers(hot, mask, positions, wide, (SKIN, LEAD, every))
             rows = light_order(hot, sel, grid.grid[0], grid.grid[1])
             p_params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
-            if not hold:
+            if not hold or exact:
                 return self._walk((wide, packed[1]), rows, grid, p_params, "cand")
-            # The records of the objects out of view carry their own mask during the walk.
+            # Float32 records, whose out-of-view objects' masks are 0: those carry their
+            # own mask during the walk.
             if (self._hidden is None or self._hidden[0] is not grid.shown
                     or self._hidden[1] is not grid.pos_of):
                 # Kept with the visibility and grid they come from (new arrays when those
@@ -1446,6 +1455,18 @@ def _grid_plan(what: str, grid: tuple) -> str:
     g_f, dims, big_pos = grid[0], grid[1], grid[4]
     return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
+
+
+def _shown_mask(shown: np.ndarray, mask: np.ndarray, single: bool) -> np.ndarray:
+    """The mask words of the records of a grid of every object (pairs.visible_objects,
+    move_records), per object: its mask when ``shown``; else, so that it pairs with no
+    light, 0 in float32 records (``single``) and in float64 records its mask in the upper
+    half of the word, where the candidate lists' walk of a moving camera finds it without
+    writing it (simd.SHOWN)."""
+    if single:
+        return np.where(shown, mask, 0).astype(mask.dtype, copy=False)
+    wide = mask.astype(np.uint64)
+    return np.where(shown, wide, wide << np.uint64(32))
 
 
 def _object_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,

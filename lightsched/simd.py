@@ -61,6 +61,14 @@ from .scene import FADING_IN, ON, SPOT
 
 LANES = 8
 RECORD = 8  # float64 words per object record
+# The bits of a record's mask word that pair with lights. In a grid of every object an
+# object out of view must pair with no light, yet the candidate lists' walk of a moving
+# camera must find it by its own mask (scheduler.Scheduler._candidates). Float64 records
+# keep such an object's mask in the upper half of the word (mask << 32): no light's mask
+# (uint32, DESIGN section 1) meets it, the walk's all-ones mask (-1.0 as a light mask:
+# ``np.int64`` and ``fptosi`` both give all 64 bits) does. Float32 records have no upper
+# half: there such an object's mask is 0 and the walk puts it in for its duration.
+SHOWN = 0xFFFFFFFF
 STREAM_AHEAD = 32  # stream_run prefetches the light rows of the entries this far ahead
 
 _F64 = ir.DoubleType()
@@ -510,7 +518,7 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
     (masked loads: at (1M, 100k), where the light rows leave L2, reading every lane's
     took 67.6 ms against 49.4). For float32 records ("fast") returns -1 at once: the caller
     runs its scalar loop. The caller guarantees the object has a mask bit (its record's
-    mask is not 0) and the room: at most one pair per candidate."""
+    mask has a SHOWN bit) and the room: at most one pair per candidate."""
     if not _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j):
         return None
     sig = types.int64(box, types.int64, hot, lf, compete, c_j, types.int64, types.int64,
@@ -626,8 +634,8 @@ def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
     end as one stream, the input of stream_run:
     cands = (seg [N, 2] (start, length), light row int32 [C]), the lists of
     scheduler._Candidates (rooms with space to grow, so not contiguous); recs = (box, its
-    integer view) the records in row order, whose mask 0 (out of view) leaves an object
-    out. stream = (light row, object row) gets the entries, starts [r1 - r0 + 1] where
+    integer view) the records in row order, whose mask without a SHOWN bit (out of view)
+    leaves an object out. stream = (light row, object row) gets the entries, starts [r1 - r0 + 1] where
     each object's begin (the last: the end). Returns the stream's length; -1 for float32
     records ("fast": the caller runs its per-object loop). Eight entries a step, stored
     whole, so the stream needs 8 entries of room past its end; an object of more than 8
@@ -674,7 +682,8 @@ def stream_fill(typingctx, cands, recs, rows, r0, r1, stream, starts):
             ob = b.load(b.gep(bits_ptr, [b.add(b.mul(o, ir.Constant(_I64, RECORD)),
                                                ir.Constant(_I64, 6))]))
             # An object out of view keeps its list but pairs with none.
-            ln = b.select(b.icmp_unsigned("!=", ob, zero), ln, zero)
+            shown = b.and_(ob, ir.Constant(_I64, SHOWN))
+            ln = b.select(b.icmp_unsigned("!=", shown, zero), ln, zero)
             o32 = _splat(b, b.trunc(o, _I32), _VI32)
             # The first step whatever the length: no branch for the four objects in five
             # of at most eight candidates.

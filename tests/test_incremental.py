@@ -18,8 +18,9 @@ from test_equivalence import big_scene, configs
 
 import lightsched as ls
 from lightsched import scheduler
-from lightsched.pairs import compact_light_lists, widen_walkers
+from lightsched.pairs import compact_light_lists, visible_objects, widen_walkers
 from lightsched.scenes import city, move_lights
+from lightsched.simd import SHOWN
 
 # Each test runs with both kinds of object grid of the fast path (conftest.py).
 pytestmark = pytest.mark.usefixtures("grid_kind")
@@ -423,7 +424,8 @@ def test_walkers_are_widened_and_led_along_their_last_step():
     now = hot[:, :3].copy()
     last = now - [[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     wide = np.full((3, 8), -7.0)
-    sel = widen_walkers(hot, np.array([True, True, False]), (now, last), wide, (skin, lead))
+    sel = widen_walkers(hot, np.array([True, True, False]), (now, last), wide,
+                        (skin, lead, float(0xFFFFFFFF)))
     assert sel.dtype == np.int32 and sel.tolist() == [0, 1]
     ahead = lead * skin * 10.0 / 5.0
     assert np.allclose(wide[0, :3], [1.0 + 3.0 * ahead, 2.0 + 4.0 * ahead, 3.0], rtol=0,
@@ -808,6 +810,33 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     else:
         assert updated == [None] * 7, t.plans
         assert "invisible casting objects" in ff.stats["plan"]["casters"]
+
+
+@pytest.mark.parametrize("single", [False, True], ids=["float64", "float32"])
+def test_an_out_of_view_objects_mask_word_meets_only_the_walk_for_a_moving_camera(single):
+    """scheduler._shown_mask, as visible_objects writes it into a record: the word of an
+    object in view meets a light's mask (uint32) as the object's mask does, and its SHOWN
+    bits are that mask; an object out of view meets no light's mask and has no SHOWN bit.
+    In float64 records it keeps its mask in the upper half, which the walk's mask of every
+    bit (-1.0, pairs.widen_walkers) meets; in float32 records it is 0, and the walk's mask
+    (float(SHOWN)) meets the objects in view only."""
+    rng = np.random.default_rng(17)
+    edge = np.array([0, 1, 6, 0x80000000, 0x80000001, 0xFFFFFFFF], np.uint32)
+    mask = np.concatenate([edge, edge, rng.integers(0, 2**32, 40).astype(np.uint32)])
+    shown = np.concatenate([np.ones(edge.size, bool), np.zeros(edge.size, bool),
+                            rng.uniform(size=40) < 0.5])
+    n = mask.size
+    recs = np.zeros((n, 8), np.float32 if single else np.float64)
+    bits = recs.view(np.uint32 if single else np.uint64)
+    lo = rng.uniform(-5, 5, (n, 3))
+    visible_objects(lo, lo + 1.0, scheduler._shown_mask(shown, mask, single), np.arange(n), n,
+                    (recs, bits), np.zeros(3))
+    word = bits[:, 6].astype(np.uint64)
+    assert np.array_equal(word & np.uint64(SHOWN), np.where(shown, mask, 0))
+    for light in [*edge.tolist(), *rng.integers(0, 2**32, 20).tolist()]:
+        assert np.array_equal(word & np.uint64(light) != 0, shown & (mask & light != 0))
+    walk = np.int64(-1.0 if not single else float(SHOWN)).astype(np.uint64)
+    assert np.array_equal(word & walk != 0, (shown | (not single)) & (mask != 0))
 
 
 @pytest.mark.parametrize("precision", ["exact", "fast"])

@@ -252,14 +252,17 @@ def records_and_run(draw):
                        st.just(200.0))
     lo = np.array([[draw(coord) + origin for _ in range(3)] for _ in range(n)])
     hi = lo + np.array([[draw(extent) for _ in range(3)] for _ in range(n)])
+    # Mask words as records hold them: an object's mask, or, out of view in a grid of
+    # every object, its mask in the upper half (simd.SHOWN).
     masks = np.array([draw(st.sampled_from([0xFFFFFFFF, 1, 2, 6, 0, 0x80000001]))
-                      for _ in range(n)], np.uint32)
+                      << draw(st.sampled_from([0, 0, 32])) for _ in range(n)], np.uint64)
     rows = np.array(draw(st.permutations(range(n))), np.int64) * 3 + 1
     v0 = draw(st.integers(0, n))
     v1 = draw(st.integers(v0, n))
     light = (draw(coord) + origin, draw(coord) + origin, draw(coord) + origin,
              draw(st.one_of(st.floats(1e-3, 60.0, **finite), st.sampled_from([1.0, 5.0, 25.0]))),
-             float(draw(st.sampled_from([0xFFFFFFFF, 1, 2, 0x80000000, 0]))),
+             # -1.0: the walk of candidate lists that hold the objects out of view.
+             float(draw(st.sampled_from([0xFFFFFFFF, 1, 2, 0x80000000, 0, -1]))),
              draw(st.one_of(st.just(0.0), st.floats(0.0, 100.0, **finite))),
              draw(st.one_of(st.just(0.0), st.floats(-3.0, 3.0, **finite))))
     return lo, hi, masks, rows, v0, v1, light
@@ -546,8 +549,9 @@ STREAMS = {packing: nb.njit(parallel=PRANGE_ONLY, nogil=True, error_model="numpy
 
 
 def candidate_scene(rng, n, n_l, dtype=np.float64):
-    """candidate_pairs' arguments for n objects (some out of view: mask 0 in the record;
-    some of zero extent, some large) and n_l point and spot lights round them, each object
+    """candidate_pairs' arguments for n objects (some out of view: no SHOWN bit in the
+    record, its mask 0 or, in float64 records, in the upper half; some of zero extent, some
+    large) and n_l point and spot lights round them, each object
     with a list of 0..24 distinct lights in a room with garbage after it, as
     scheduler._Candidates keeps them."""
     centre = rng.normal(size=(n, 3)) * 15.0
@@ -557,6 +561,9 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
     bits = recs.view(np.int32 if dtype == np.float32 else np.int64)
     visible_objects(centre - half, centre + half, masks, np.arange(n), n, (recs, bits),
                     np.zeros(3))
+    if dtype == np.float64:
+        hide = rng.uniform(size=n) < 0.15
+        bits[hide, 6] = (masks[hide].astype(np.uint64) << np.uint64(32)).view(np.int64)
     hot = np.zeros((n_l, 8))
     lf = np.zeros((n_l, 8))
     typ = np.where(rng.uniform(size=n_l) < 0.3, SPOT, POINT)
@@ -618,7 +625,7 @@ def check_stream(rng, n, n_l):
                 assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
                 for r, o in enumerate(which):
                     want = (np.zeros(n_l), np.zeros(n_l, np.int32))
-                    ob = np.int64(recs[1][o, 6])
+                    ob = np.int64(recs[1][o, 6]) & simd.SHOWN
                     end = pairs_scalar(recs[0], ob, o, lights, compete, c_j, seg[o, 0],
                                        seg[o, 0] + (seg[o, 1] if ob else 0), want, 0, params)
                     a, m = o_seg[o]
