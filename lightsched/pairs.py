@@ -1745,41 +1745,59 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
 # the segments it no longer points to are garbage until the heap is compacted.
 
 
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def scan_pairs(seg, heap_j, light_flag, drop):
-    """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
-    so an incremental frame finds the objects that hold a pair of a changed light, and
-    the number of its pairs whose light's flag has no ``drop`` bit: the pairs
-    ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
-    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects).
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _scan_object(o, seg, heap_j, light_flag, drop):
+    """(the OR of light_flag over object o's cached pairs, how many have no ``drop`` bit).
 
     Objects hold a few pairs each (4.4 on average in the city, 0 to 16), so a loop over
     each list's length mispredicts its exit about once an object. The first SCAN_LANES
     pairs are read in a loop of fixed length instead, the lanes past the end reading the
     last pair again and counting nothing: on a lights10 frame's captured inputs at (100k,
     10k), 1.03 -> 0.81 ms (4 lanes 0.93, 12 lanes 1.08)."""
+    a = seg[o, 0]
+    size = seg[o, 1]
+    acc = 0
+    keep = 0
+    if size > 0:
+        last = a + size - 1
+        for k in range(SCAN_LANES):
+            f = light_flag[heap_j[min(a + k, last)]]
+            acc |= f
+            keep += ((f & drop) == 0) & (k < size)
+        for t in range(a + SCAN_LANES, a + size):
+            f = light_flag[heap_j[t]]
+            acc |= f
+            keep += (f & drop) == 0
+    return acc, keep
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def scan_pairs(seg, heap_j, light_flag, drop):
+    """Per object row (parallel): the OR of light_flag[light row] over its cached pairs,
+    so an incremental frame finds the objects that hold a pair of a changed light, and
+    the number of its pairs whose light's flag has no ``drop`` bit: the pairs
+    ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
+    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
     kept = np.empty(n, np.int64)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
         for o in range(ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK)):
-            a = seg[o, 0]
-            size = seg[o, 1]
-            acc = 0
-            keep = 0
-            if size > 0:
-                last = a + size - 1
-                for k in range(SCAN_LANES):
-                    f = light_flag[heap_j[min(a + k, last)]]
-                    acc |= f
-                    keep += ((f & drop) == 0) & (k < size)
-                for t in range(a + SCAN_LANES, a + size):
-                    f = light_flag[heap_j[t]]
-                    acc |= f
-                    keep += (f & drop) == 0
-            out[o] = acc
-            kept[o] = keep
+            out[o], kept[o] = _scan_object(o, seg, heap_j, light_flag, drop)
+    return out, kept
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def scan_rows(rows, seg, heap_j, light_flag, drop):
+    """scan_pairs at the object ``rows`` only, on the calling thread (the few objects the
+    flagged lights reach): the flags' OR is 0 and ``kept`` undefined at every other row."""
+    n = seg.shape[0]
+    out = np.zeros(n, np.uint8)
+    kept = np.empty(n, np.int64)
+    for r in range(rows.shape[0]):
+        o = rows[r]
+        out[o], kept[o] = _scan_object(o, seg, heap_j, light_flag, drop)
     return out, kept
 
 

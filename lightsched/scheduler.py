@@ -81,6 +81,7 @@ from .pairs import (
     object_pass,
     replace_lists,
     scan_pairs,
+    scan_rows,
     spread_lists,
     start_at,
     visible_objects,
@@ -121,6 +122,16 @@ BRUTE_FORCE_PAIRS = 1 << 15
 # no light changes, and ~0.4 us an object (pairs.light_grid); before it, a grid of the
 # moved objects walked by every light took ~2.8 ms for 1000 of them at (100k, 10k).
 DIRECT_TESTS_PER_LIGHT = 24
+# With the grid of the lights kept, an object's pairs from it cost ~0.4 us, ~110 direct
+# tests: more point and spot lights than that, and the kept grid serves (at (1M, 100k), 20
+# objects coming into view against 78k lights took 3.3 ms direct).
+GRID_TESTS_PER_OBJECT = 110
+# An incremental frame whose flagged lights (changed, or whose "live" or shadow map
+# changed) did not change finds the objects holding their pairs by walking them (~2 us a
+# light), not by scanning every object's pairs (~3 ns a pair: ~10 ms at (1M, 100k), where
+# a moving camera flags the few lights entering or leaving the view), while there are at
+# least this many cached pairs per flagged light.
+NEAR_SCAN_PAIRS = 4096
 # An incremental frame whose walked lights have at most this many pairs per object groups
 # them by sorting (pairs.group_few, ~60 ns a pair), not with a histogram of every object
 # (~3 ns an object: ~0.3 ms at 100k objects, for no pair too).
@@ -656,7 +667,9 @@ class Scheduler(SceneAPI):
                 light_cells = c.light_grid
             if not fresh_rows.size:
                 fresh_obj = (np.zeros(n + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32)))
-            elif fresh_rows.size * n_point <= DIRECT_TESTS_PER_LIGHT * n_point + n:
+            elif fresh_rows.size * n_point <= (
+                    DIRECT_TESTS_PER_LIGHT * n_point + n if light_cells is None
+                    else GRID_TESTS_PER_OBJECT * fresh_rows.size):
                 fresh_obj = self._fresh_pairs(fresh_rows, packed, compete, is_dir, p_params,
                                               rec_frame, None)
             else:
@@ -781,9 +794,28 @@ class Scheduler(SceneAPI):
                              "whose shadow map changed, fading slots"
                              + (", a cut" if cut else "") + ")")
         else:
-            seg, heap, used, run = self._patch(c, walked, live, shadow_of_row, fresh, fresh_obj,
-                                               fresh_rows, left_rows, cut, vis_o)
-            plan["lists"] = (f"cache kept; {run.size} of {np.count_nonzero(vis_o)} visible "
+            def near(flagged: np.ndarray) -> np.ndarray | None:
+                # The objects that can hold a pair of the lights ``flagged``, when none of
+                # them changed this frame: each such pair was made with the light as it
+                # is, so an object holding one that is in view now meets the light in the
+                # grid (exact records: the same test, the same bits); one that moved, came
+                # into view or left it takes new lists whatever it holds. None: scan every
+                # object's pairs (a light changed, a directional one, float32 records whose
+                # origin may have moved, or more walks than the scan costs).
+                if (fast or lrows is None or flagged.size * NEAR_SCAN_PAIRS > c.pairs
+                        or is_dir[flagged].any() or np.isin(flagged, lrows).any()):
+                    return None
+                order = light_order(packed[0], flagged.astype(np.int32), grid.grid[0],
+                                    grid.grid[1])
+                _, offsets, count, pair_obj, _ = self._walk(packed, order, grid, p_params,
+                                                            "near")
+                return np.unique(np.concatenate(
+                    [pair_obj[offsets[t]:offsets[t] + count[t]] for t in range(order.size)]
+                    + [_NO_ROWS]))
+            seg, heap, used, run, scanned = self._patch(c, walked, live, shadow_of_row, fresh,
+                                                        fresh_obj, fresh_rows, left_rows, cut,
+                                                        vis_o, near)
+            plan["lists"] = (f"cache kept; {scanned}; {run.size} of {np.count_nonzero(vis_o)} visible "
                              f"objects recomputed (pairs of changed lights, moved or newly "
                              f"visible objects, shadow-map changes, fading slots"
                              + (", a cut" if cut else "") + ")")
@@ -1222,11 +1254,15 @@ class Scheduler(SceneAPI):
     def _patch(self, c: _Cache, walked: np.ndarray, live: np.ndarray,
                shadow_of_row: np.ndarray, fresh: tuple[np.ndarray, ...],
                fresh_obj: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]],
-               fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray
-               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int, np.ndarray]:
-        """The cache's pair lists brought up to date, and the object rows to recompute.
+               fresh_rows: np.ndarray, left_rows: np.ndarray, cut: bool, vis_o: np.ndarray,
+               near: Callable[[np.ndarray], np.ndarray | None]
+               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int, np.ndarray, str]:
+        """The cache's pair lists brought up to date, the object rows to recompute, and
+        which pairs were scanned (for the plan).
 
-        Objects holding a pair of a walked light (found by scanning the cache) and objects
+        Objects holding a pair of a walked light (found by scanning the cache: every
+        object's pairs, or those of the objects ``near`` gives for the flagged lights) and
+        objects
         the walk gave pairs keep their other pairs and take the fresh ones; moved or newly
         visible objects take their new lists (``fresh_obj``: grouped by object row, start
         valid at ``fresh_rows`` and the row after each); objects that left the view lose
@@ -1235,8 +1271,18 @@ class Scheduler(SceneAPI):
         flag = np.zeros(live.size, np.uint8)
         flag[walked] |= WALKED
         flag[(live != c.live) | (shadow_of_row != c.shadow_of_row)] |= RESELECT
-        holds, kept = (scan_pairs(c.seg, c.heap[1], flag, WALKED) if flag.any()
-                       else (np.zeros(n, np.uint8), np.zeros(0, np.int64)))
+        flagged = np.flatnonzero(flag)
+        rows_near = near(flagged) if flagged.size else None
+        if rows_near is not None:
+            holds, kept = scan_rows(rows_near, c.seg, c.heap[1], flag, WALKED)
+            scanned = (f"the pairs of the {rows_near.size} objects the {flagged.size} "
+                       "flagged lights reach scanned")
+        elif flagged.size:
+            holds, kept = scan_pairs(c.seg, c.heap[1], flag, WALKED)
+            scanned = f"every object's pairs scanned for {flagged.size} flagged lights"
+        else:
+            holds, kept = np.zeros(n, np.uint8), np.zeros(0, np.int64)
+            scanned = "no light flagged"
         few = int(fresh[2].sum()) <= FEW_PAIRS * n
         if few:
             w_obj, w_pairs = group_few(*fresh)
@@ -1267,7 +1313,7 @@ class Scheduler(SceneAPI):
         run[rows1] = True
         if cut:
             run |= vis_o | c.vis_o
-        return seg, heap, used, np.flatnonzero(run)
+        return seg, heap, used, np.flatnonzero(run), scanned
 
     def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                  lights_packed: tuple[np.ndarray, np.ndarray], grid: _Grid,

@@ -41,7 +41,7 @@ from lightsched import scheduler  # noqa: E402
 register_profile()
 
 # EVERY_OBJECT_SHARE that forces each kind of grid of the fast path (scheduler.py): every
-# object in it (an invisible object's record masked to 0), or only the visible objects
+# object in it (an invisible object's record masked: simd.SHOWN), or only the visible objects
 # (and a second grid of the invisible casters near shadowed point and spot lights).
 GRID_KINDS = {"every": 0.0, "visible": math.inf}
 
@@ -56,15 +56,20 @@ def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
     against every light with the first kind, from a grid of the lights with the second;
     and the pairs of the lights an incremental frame walks again are
     grouped by sorting with the first, by a histogram of every object with the second
-    (the scheduler chooses both by counts, DIRECT_TESTS_PER_LIGHT and FEW_PAIRS, which
-    small scenes would not cross)."""
+    (the scheduler chooses both by counts, DIRECT_TESTS_PER_LIGHT, GRID_TESTS_PER_OBJECT
+    and FEW_PAIRS, which small scenes would not cross). With both, an incremental frame
+    whose flagged lights did not change finds the objects holding their pairs by walking
+    them (NEAR_SCAN_PAIRS: the scheduler walks them only where the cache holds thousands
+    of pairs per flagged light); where they changed, it scans every object's pairs."""
     names = ("EVERY_OBJECT_SHARE", "CANDIDATE_MIN_OBJECTS", "DIRECT_TESTS_PER_LIGHT",
-             "FEW_PAIRS")
+             "GRID_TESTS_PER_OBJECT", "FEW_PAIRS", "NEAR_SCAN_PAIRS")
     old = {name: getattr(scheduler, name) for name in names}
     every = request.param == "every"
     scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
     scheduler.CANDIDATE_MIN_OBJECTS = 0
     scheduler.DIRECT_TESTS_PER_LIGHT = 1e18 if every else -1e18
+    scheduler.GRID_TESTS_PER_OBJECT = 1e18 if every else -1e18
+    scheduler.NEAR_SCAN_PAIRS = 0
     scheduler.FEW_PAIRS = math.inf if every else -1
     yield request.param
     for name, value in old.items():
