@@ -51,7 +51,13 @@ import numpy as np
 
 from .changes import camera_key, changed_rows, same_key
 from .frame import PER_OBJECT, Frame, copy_rows, empty_frame, freeze, held_elsewhere
-from .frustum import CameraFrames, cascade_splits, lights_visible, objects_visible
+from .frustum import (
+    CameraFrames,
+    cascade_splits,
+    lights_visible,
+    objects_visible,
+    objects_visible_groups,
+)
 from .pairs import (
     GROUP_PARTS,
     RUN_SPLIT,
@@ -483,6 +489,7 @@ class Scheduler(SceneAPI):
         # the box of the visible objects then takes in theirs without letting go of the
         # old one (it only sets a grid's extent, which may be larger than needed).
         objects_moved = same_origin and same_cams and orows is not None and 0 < orows.size
+        vis_how = ""
         if objects_kept:
             vis_o, box = c.vis_o, c.box
         elif objects_moved:
@@ -492,6 +499,17 @@ class Scheduler(SceneAPI):
             vis_o[orows] = vis_moved
             box = np.concatenate([np.minimum(c.box[:3], box_moved[:3]),
                                   np.maximum(c.box[3:], box_moved[3:])])
+        elif (c is not None and c.grid.shown is not None and orows is not None
+              and orows.size == 0):
+            # The objects of last frame's grid of every object, under moved cameras: its
+            # group boxes first (those wholly in or out of view), then the objects of the
+            # groups on a frustum's planes.
+            boxes = _group_boxes(c.grid, objs.bounds_min, objs.bounds_max, fast)
+            vis_o, box = objects_visible_groups(
+                boxes, frames.plane_n, frames.plane_p,
+                (c.grid.pos_of, c.grid.group_box, SWEEP_GROUP))
+            vis_how = (f"; by the boxes of {SWEEP_GROUP} positions of last frame's grid of "
+                       "every object first")
         else:
             vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
                                          frames.plane_p)
@@ -905,7 +923,7 @@ class Scheduler(SceneAPI):
         plan["visibility"] = f"frustum planes, {len(frames)} camera(s)" + (
             "; the objects' kept (they and the cameras did not change)" if objects_kept else
             f"; the {orows.size} changed objects' only (the cameras did not change)"
-            if objects_moved else "")
+            if objects_moved else vis_how)
         plan["priority"] = cfg.model + (
             " (fast: float32 object records relative to the first camera's position, re-anchored "
             f"beyond {REANCHOR:g} m; float64 arithmetic)"
@@ -1360,13 +1378,8 @@ class Scheduler(SceneAPI):
                 lmask = lights.mask[rows_t[sun]].astype(np.int64)
                 sun_vols = (vn[sun], vq[sun], vm[sun], shared[sun])
                 if grid.shown is not None:
-                    # A grid of every object: its group boxes first. Its records hold the
-                    # world boxes in exact precision (origin 0, float64), in grid order;
-                    # "fast" ones are rounded, so the stores' boxes are read by row.
-                    boxes = ((lo, hi, grid.vis[2], True) if frame[1] else
-                             (grid.vis[0][:, :3], grid.vis[0][:, 3:6], grid.vis[2], False))
-                    if grid.group_box is None:
-                        grid.group_box = group_boxes(boxes)
+                    # A grid of every object: its group boxes first.
+                    boxes = _group_boxes(grid, lo, hi, frame[1])
                     at, rows, masks = sweep_groups(casts, objs.mask, lmask, sun_vols, boxes,
                                                    grid.group_box)
                     at = at.tolist()
@@ -1501,6 +1514,19 @@ def _grid_plan(what: str, grid: tuple) -> str:
     g_f, dims, big_pos = grid[0], grid[1], grid[4]
     return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
+
+
+def _group_boxes(grid: _Grid, lo: np.ndarray, hi: np.ndarray, single: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """The boxes of a grid of every object as shadows.group_boxes reads them, its group
+    boxes made from them if it has none yet. Its records hold the world boxes in exact
+    precision (origin 0, float64), in grid order; "fast" ones (``single``) are rounded, so
+    the stores' boxes (lo, hi) are read by row."""
+    boxes = ((lo, hi, grid.vis[2], True) if single else
+             (grid.vis[0][:, :3], grid.vis[0][:, 3:6], grid.vis[2], False))
+    if grid.group_box is None:
+        grid.group_box = group_boxes(boxes)
+    return boxes
 
 
 def _shown_mask(shown: np.ndarray, mask: np.ndarray, single: bool) -> np.ndarray:

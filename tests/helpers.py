@@ -381,3 +381,16 @@ def frames_identical(a: ls.Frame, b: ls.Frame, what: str = "") -> None:
         else:
             same = np.array_equal(x, y)
         assert same, f"{what}: {name} differs\n{x!r}\n{y!r}"
+
+
+def by_row_or_grid(lo: np.ndarray, hi: np.ndarray, grid_rows: np.ndarray, by_row: bool
+                   ) -> tuple:
+    """The boxes of a grid's positions as shadows.group_boxes, sweep_groups and
+    frustum.objects_visible_groups read them: the objects' by row, or (as a grid's float64
+    records hold them) copied into grid order, as views of one [V, 8] array."""
+    if by_row:
+        return lo, hi, grid_rows, True
+    recs = np.zeros((grid_rows.size, 8))
+    recs[:, :3] = lo[grid_rows]
+    recs[:, 3:6] = hi[grid_rows]
+    return recs[:, :3], recs[:, 3:6], grid_rows, False

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import assert_frames_match, camera, examples, up_for
+from helpers import assert_frames_match, by_row_or_grid, camera, examples, up_for
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -425,18 +425,6 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
     want = sweep_bits_by_numpy(lo, hi, casts, omask, lmask, vols)
     assert np.count_nonzero(want) > 100
     assert np.array_equal(got, want)
-
-
-def by_row_or_grid(lo: np.ndarray, hi: np.ndarray, grid_rows: np.ndarray, by_row: bool
-                   ) -> tuple:
-    """sweep_groups' boxes: the objects' by row, or (as a grid's float64 records hold
-    them) copied into grid order, as views of one [V, 8] array."""
-    if by_row:
-        return lo, hi, grid_rows, True
-    recs = np.zeros((grid_rows.size, 8))
-    recs[:, :3] = lo[grid_rows]
-    recs[:, 3:6] = hi[grid_rows]
-    return recs[:, :3], recs[:, 3:6], grid_rows, False
 
 
 @examples(0.2)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from helpers import Twin, assert_frames_match, examples, up_for
+from helpers import Twin, assert_frames_match, by_row_or_grid, examples, up_for
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -164,14 +164,11 @@ def test_one_frame_matches_oracle(sc):
     assert not t.plans[0].startswith("grid"), t.plans[0]
 
 
-@examples(1.0)
-@given(cams=camera_list(), seed=st.integers(0, 2**32 - 1), n=st.sampled_from([0, 1, 511, 1300]))
-def test_object_visibility_matches_oracle(cams, seed, n):
-    """frustum.objects_visible tests blocks of boxes plane by plane, in columns: the same
-    visibility as the oracle's corner test box by box, across block ends, with zero-extent
-    boxes and integer coordinates on the planes of an axis-aligned camera (normals with zero
-    components), and the same bounding box of the visible objects."""
-    from lightsched.frustum import CameraFrames, objects_visible
+def _visibility_scene(cams: list, seed: int, n: int) -> tuple:
+    """n boxes round an axis-aligned camera added to ``cams`` (zero-extent boxes, integer
+    coordinates on its planes), the cameras' frames, and the oracle's visibility and
+    planes."""
+    from lightsched.frustum import CameraFrames
 
     rng = np.random.default_rng(seed)
     cams = [*cams, ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0.0, 1.0]),
@@ -181,16 +178,82 @@ def test_object_visibility_matches_oracle(cams, seed, n):
                       rng.uniform(-30.0, 30.0, (n, 3))) + [0.0, 0.0, 10.0]
     half = np.where(rng.random((n, 3)) < 0.3, 0.0, rng.uniform(0.0, 4.0, (n, 3)))
     lo, hi = centre - half, centre + half
-    f = CameraFrames(cams)
-    vis, box = objects_visible(lo, hi, f.plane_n, f.plane_p)
     planes = [ref.CameraFrame(c).planes for c in cams]
     want = np.array([any(ref.aabb_in_planes(p, tuple(lo[o]), tuple(hi[o])) for p in planes)
                      for o in range(n)], bool)
+    return rng, lo, hi, CameraFrames(cams), want, planes
+
+
+@examples(1.0)
+@given(cams=camera_list(), seed=st.integers(0, 2**32 - 1), n=st.sampled_from([0, 1, 511, 1300]))
+def test_object_visibility_matches_oracle(cams, seed, n):
+    """frustum.objects_visible tests blocks of boxes plane by plane, in columns: the same
+    visibility as the oracle's corner test box by box, across block ends, with zero-extent
+    boxes and integer coordinates on the planes of an axis-aligned camera (normals with zero
+    components), and the same bounding box of the visible objects."""
+    from lightsched.frustum import objects_visible
+
+    _, lo, hi, f, want, _ = _visibility_scene(cams, seed, n)
+    vis, box = objects_visible(lo, hi, f.plane_n, f.plane_p)
     assert np.array_equal(vis, want)
     if want.any():
         assert np.array_equal(box, np.concatenate([lo[want].min(0), hi[want].max(0)]))
     else:
         assert np.array_equal(box, [np.inf] * 3 + [-np.inf] * 3)
+
+
+@examples(1.0)
+@given(cams=camera_list(), seed=st.integers(0, 2**32 - 1), n=st.sampled_from([1, 700, 3000]),
+       order=st.sampled_from(["cells", "random"]), by_row=st.booleans(),
+       size=st.sampled_from([4, 64]))
+def test_object_visibility_by_group_boxes_matches_oracle(cams, seed, n, order, by_row, size):
+    """frustum.objects_visible_groups (a grid's group boxes first: those wholly inside a
+    frustum, those in none, then the objects of the others) gives the oracle's visibility,
+    with grid positions in cells (groups inside, outside and across the planes) or in
+    random order (every group across them), boxes read by row or from records in grid
+    order, before and after some objects move within their group boxes, widened in place
+    (shadows.widen_group_boxes); its box holds the visible objects' and lies within the
+    group boxes."""
+    from lightsched.frustum import objects_visible_groups
+    from lightsched.shadows import group_boxes, widen_group_boxes
+
+    rng, lo, hi, f, want, planes = _visibility_scene(cams, seed, n)
+    if order == "cells":
+        cell = np.floor((lo + hi) / 2 / 6.0).astype(np.int64) + 8
+        grid_rows = np.argsort((cell[:, 0] * 17 + cell[:, 1]) * 17 + cell[:, 2], kind="stable")
+    else:
+        grid_rows = rng.permutation(n)
+    pos_of = np.empty(n, np.int64)
+    pos_of[grid_rows] = np.arange(n)
+    gbox = group_boxes(by_row_or_grid(lo, hi, grid_rows, by_row)) if size == 64 else None
+    if gbox is None:
+        gbox = np.array([np.concatenate([lo[grid_rows[v:v + size]].min(0),
+                                         hi[grid_rows[v:v + size]].max(0)])
+                         for v in range(0, n, size)])
+    for step in range(2):
+        if step:
+            # Some objects move within their group's box, which takes in their new box.
+            moved = rng.permutation(n)[:n // 4]
+            shift = rng.uniform(-2.0, 2.0, (moved.size, 3))
+            lo[moved] += shift
+            hi[moved] += shift
+            if size == 64:
+                widen_group_boxes(gbox, lo, hi, moved, pos_of)
+            else:
+                for o in moved:
+                    g = pos_of[o] // size
+                    gbox[g] = np.concatenate([np.minimum(gbox[g, :3], lo[o]),
+                                              np.maximum(gbox[g, 3:], hi[o])])
+            want = np.array([any(ref.aabb_in_planes(p, tuple(lo[o]), tuple(hi[o]))
+                                 for p in planes) for o in range(n)], bool)
+        at = by_row_or_grid(lo, hi, grid_rows, by_row)
+        vis, box = objects_visible_groups(at, f.plane_n, f.plane_p, (pos_of, gbox, size))
+        assert np.array_equal(vis, want), step
+        if want.any():
+            assert (box[:3] <= lo[want].min(0)).all() and (box[3:] >= hi[want].max(0)).all()
+            assert (box[:3] >= gbox[:, :3].min(0)).all() and (box[3:] <= gbox[:, 3:].max(0)).all()
+        else:
+            assert np.array_equal(box, [np.inf] * 3 + [-np.inf] * 3)
 
 
 @examples(1.0)

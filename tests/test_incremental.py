@@ -783,9 +783,10 @@ def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
 
 def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     """A camera turning back and forth over a city: a grid of every object is kept, and the
-    objects that leave or enter the view only get their record's mask word again. The
-    lights entering and leaving the view find the objects holding their pairs by walking
-    the grid, not by a scan of every object's pairs. Frames equal the oracle's, casters of
+    objects that leave or enter the view only get their record's mask word again; the
+    visibility tests its group boxes first. The lights entering and leaving the view find
+    the objects holding their pairs by walking the grid, not by a scan of every object's
+    pairs. Frames equal the oracle's, casters of
     shadowed point and spot lights among invisible objects included, and those of a
     scheduler that builds everything anew."""
     scene = city(3_000, 300, seed=8, shadow_fraction=0.1)
@@ -794,7 +795,7 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     for s in (t, p):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
-    updated, near = [], []
+    updated, near, by_groups = [], [], []
     for i, angle in enumerate([0.0, 0.3, 0.6, 0.3, 0.0, 0.5, 0.1]):
         cams = [_turned_camera(scene.cameras[0], angle)]
         ff, _ = t.frame(cams)
@@ -806,11 +807,13 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
         updated.append(int(found[1]) if found else None)
         found = re.search(r"the (\d+) flagged lights reach scanned", fa.stats["plan"]["lists"])
         near.append(int(found[1]) if found else 0)
+        by_groups.append("grid of every object first" in fa.stats["plan"]["visibility"])
     assert not t.diverged
     assert near[0] == 0 and min(near[1:]) > 0, near
     if grid_kind == "every":
         assert updated[0] is None and all(u is not None for u in updated[1:]), t.plans
         assert min(updated[1:]) > 0 and max(updated[1:]) > 100, updated  # left and entered
+        assert by_groups == [False] + [True] * 6, by_groups
         assert "the grid of every object" in ff.stats["plan"]["casters"]
     else:
         assert updated == [None] * 7, t.plans
