@@ -1280,11 +1280,10 @@ class Scheduler(SceneAPI):
 
         Objects holding a pair of a walked light (found by scanning the cache: every
         object's pairs, or those of the objects ``near`` gives for the flagged lights) and
-        objects
-        the walk gave pairs keep their other pairs and take the fresh ones; moved or newly
-        visible objects take their new lists (``fresh_obj``: grouped by object row, start
-        valid at ``fresh_rows`` and the row after each); objects that left the view lose
-        theirs."""
+        objects the walk gave pairs keep their other pairs and take the fresh ones; moved
+        or newly visible objects take their new lists (``fresh_obj``: grouped by object
+        row, start valid at ``fresh_rows`` and the row after each); objects that left the
+        view lose theirs."""
         n = vis_o.size
         flag = np.zeros(live.size, np.uint8)
         flag[walked] |= WALKED
