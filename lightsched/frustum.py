@@ -165,8 +165,9 @@ def _hull(boxes, k):
     return b
 
 
-# objects_visible_groups deals the groups to this many parallel parts in turn.
-GROUP_PARTS = 64
+# objects_visible_groups deals the groups to this many parallel parts in turn (not
+# pairs.GROUP_PARTS, the histograms of the pairs' grouping).
+VISIBLE_PARTS = 64
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -225,7 +226,7 @@ def objects_visible_groups(at, plane_n, plane_p, groups):
     n_g = gbox.shape[0]
     n = pos_of.shape[0]
     by_pos = np.zeros(rows.shape[0], np.bool_)
-    parts = min(GROUP_PARTS, n_g)
+    parts = min(VISIBLE_PARTS, n_g)
     boxes = np.empty((parts, 6))
     for part in nb.prange(parts):
         b = _hull(gbox, 0)
