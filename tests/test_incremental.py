@@ -786,9 +786,8 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     objects that leave or enter the view only get their record's mask word again; the
     visibility tests its group boxes first. The lights entering and leaving the view find
     the objects holding their pairs by walking the grid, not by a scan of every object's
-    pairs. Frames equal the oracle's, casters of
-    shadowed point and spot lights among invisible objects included, and those of a
-    scheduler that builds everything anew."""
+    pairs. Frames equal the oracle's, casters of shadowed point and spot lights among
+    invisible objects included, and those of a scheduler that builds everything anew."""
     scene = city(3_000, 300, seed=8, shadow_fraction=0.1)
     cfg = ls.Config(max_lights=4, shadow_budget=8)
     t, p = Twin(cfg), _Pair(cfg)
