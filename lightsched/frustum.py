@@ -198,62 +198,128 @@ def _box_visible(plane_n, plane_p, box, i, far):
     return False
 
 
+# The OUT/ACROSS/IN classes of a group box against the frusta (objects_visible_groups).
+OUT = 0
+ACROSS = 1
+IN = 2
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _group_class(plane_n, plane_p, gbox, g):
+    """IN when boxes[g] lies wholly inside some camera's frustum, OUT when it is in none
+    by objects_visible's test, else ACROSS (on a plane)."""
+    if _box_visible(plane_n, plane_p, gbox, g, False):
+        return IN
+    if _box_visible(plane_n, plane_p, gbox, g, True):
+        return ACROSS
+    return OUT
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _across(plane_n, plane_p, gbox, g, col, m, out):
+    """objects_visible's test of the m boxes in columns col ([lo, hi] rows of 6) of group
+    g, whose box gbox[g] is across a plane: out = (seen, ok) [>= m], seen the flags. Each
+    camera takes only the planes the group box is across: every object is inside a plane
+    the group box is wholly inside, and outside one it is wholly outside (the argument of
+    objects_visible_groups), so that camera sees none of them."""
+    seen, ok = out
+    seen[:m] = False
+    for cam in range(plane_n.shape[0]):
+        ok[:m] = True
+        for j in range(6):
+            if not _plane_d(plane_n, plane_p, cam, j, gbox, g, True) >= 0.0:
+                ok[:m] = False
+                break
+            if _plane_d(plane_n, plane_p, cam, j, gbox, g, False) >= 0.0:
+                continue
+            n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
+            q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
+            c0 = 3 if n0 >= 0.0 else 0
+            c1 = 4 if n1 >= 0.0 else 1
+            c2 = 5 if n2 >= 0.0 else 2
+            for i in range(m):
+                # n . (x - q), summed in x, y, z order, as objects_visible.
+                d = (n0 * (col[c0, i] - q0) + n1 * (col[c1, i] - q1)
+                     + n2 * (col[c2, i] - q2))
+                ok[i] = ok[i] & (d >= 0.0)
+        for i in range(m):
+            seen[i] = seen[i] | ok[i]
+
+
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def objects_visible_groups(at, plane_n, plane_p, groups):
+def objects_visible_groups(at, plane_n, plane_p, groups, last):
     """objects_visible over a grid of every object, a group of its positions at a time:
     at = (lo, hi, rows, by_row) the boxes as shadows.group_boxes reads them: position v's
     is row rows[v] of lo and hi if by_row, else row v (a grid's float64 records, in order:
     the objects of a group are then read as one run, not from 64 random rows, which at
     (1M, 100k) took the pass to 4.9 ms); groups = (pos_of [N], each row's position; boxes
-    [G, 6], the box round each ``size`` consecutive positions' objects; size). A group box
-    wholly inside a camera's frustum (its corner nearest along each normal inside) holds
-    only visible objects; one in no frustum (objects_visible's test fails) holds none; the
-    objects of the others take objects_visible's test one by one. Returns (visible [N], a
-    box holding the visible objects): the visible groups' boxes and the visible objects'
-    of the other groups, so it may be larger than theirs (it only sets a grid's extent).
+    [G, 6], the box round each ``size`` consecutive positions' objects; size); last =
+    (visible [N], class [G]) of a pass over the same groups whose flags are still the
+    objects', or a class of size 0 for none. Returns (visible [N], a box holding the
+    visible objects, class [G]): the box is the IN groups' boxes and the visible objects'
+    of the ACROSS ones, so it may be larger than theirs (it only sets a grid's extent).
 
     Exact, not approximate, as shadows.sweep_groups: the group box's corner nearest along
     a normal lies no further along it than any of its objects' farthest corners, and each
     operation of the distance (a difference, a product by the normal's component, a sum)
     rounds monotonically, so the group's distance is at most each object's; the same for
-    the farthest corners the other way. The flags are written by position, a group's in
-    one run, then gathered into row order at pos_of, so the parallel parts never write
-    to one cache line at random rows. At (1M, 100k) under a camera moving round the city
-    (11662 of 15625 groups wholly in view, 935 across a plane): 1.9 ms, against 4.8 for
-    objects_visible, which reads 48 MB of bounds (bench/RESULTS.md)."""
+    the farthest corners the other way. So an IN group (_group_class) holds only visible
+    objects, an OUT one none, and the objects of an ACROSS one take objects_visible's test
+    one by one. With ``last``, a group whose class is IN or OUT again keeps its objects'
+    flags (they are all that class's): under a camera moving round the (1M, 100k) city
+    only the ~900 groups across a plane and the few that changed class are written, at
+    their rows. Without, the flags are written by position, a group's in one run, then
+    gathered into row order at pos_of, so the parallel parts never write to one cache
+    line at random rows (11662 of 15625 groups wholly in view, 935 across a plane: 1.9 ms,
+    against 4.8 for objects_visible, which reads 48 MB of bounds; bench/RESULTS.md)."""
     lo, hi, rows, by_row = at
     pos_of, gbox, size = groups
+    vis_last, class_last = last
+    since = class_last.shape[0] > 0
     n_g = gbox.shape[0]
     n = pos_of.shape[0]
-    by_pos = np.zeros(rows.shape[0], np.bool_)
+    # (A copy, not a loop: numba's loop over bools is not vectorised, 0.5 ms at 1M.)
+    flags = vis_last.copy() if since else np.zeros(rows.shape[0], np.bool_)
+    cls = np.empty(n_g, np.int8)
     parts = min(VISIBLE_PARTS, n_g)
     boxes = np.empty((parts, 6))
     for part in nb.prange(parts):
         b = _hull(gbox, 0)
-        one = np.empty((1, 6))
+        col = np.empty((6, size))
+        seen = np.empty(size, np.bool_)
+        ok = np.empty(size, np.bool_)
         for g in range(part, n_g, parts):
             v0 = g * size
             v1 = min(rows.shape[0], v0 + size)
-            if _box_visible(plane_n, plane_p, gbox, g, False):
-                for v in range(v0, v1):
-                    by_pos[v] = True
+            c = _group_class(plane_n, plane_p, gbox, g)
+            cls[g] = c
+            if c == IN:
                 _widen(b, gbox, g)
-            elif _box_visible(plane_n, plane_p, gbox, g, True):
-                for v in range(v0, v1):
-                    p = rows[v] if by_row else v
+            if c == ACROSS:
+                m = v1 - v0
+                for i in range(m):
+                    p = rows[v0 + i] if by_row else v0 + i
                     for a in range(3):
-                        one[0, a] = lo[p, a]
-                        one[0, 3 + a] = hi[p, a]
-                    if _box_visible(plane_n, plane_p, one, 0, True):
-                        by_pos[v] = True
-                        _widen(b, one, 0)
+                        col[a, i] = lo[p, a]
+                        col[3 + a, i] = hi[p, a]
+                _across(plane_n, plane_p, gbox, g, col, m, (seen, ok))
+                for i in range(m):
+                    flags[rows[v0 + i] if since else v0 + i] = seen[i]
+                    for a in range(3):
+                        b[a] = min(b[a], col[a, i] if seen[i] else np.inf)
+                        b[3 + a] = max(b[3 + a], col[3 + a, i] if seen[i] else -np.inf)
+            elif c != (class_last[g] if since else OUT):
+                for v in range(v0, v1):
+                    flags[rows[v] if since else v] = c == IN
         boxes[part] = b
+    if since:
+        return flags, _hull(boxes, parts), cls
     out = np.empty(n, np.bool_)
     n_blocks = (n + VISIBLE_BLOCK - 1) // VISIBLE_BLOCK
     for blk in nb.prange(n_blocks):
         for o in range(blk * VISIBLE_BLOCK, min(n, (blk + 1) * VISIBLE_BLOCK)):
-            out[o] = by_pos[pos_of[o]]
-    return out, _hull(boxes, parts)
+            out[o] = flags[pos_of[o]]
+    return out, _hull(boxes, parts), cls
 
 
 # Below this many lights a per-light kernel (lights_visible, priority._pack,

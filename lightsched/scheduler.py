@@ -291,6 +291,10 @@ class _Cache:
     cands: _Candidates | None = None
     # The grid of the point and spot lights (pairs.light_grid) while they do not change.
     light_grid: tuple | None = None
+    # (pos_of, class per group) of the last group pass of visibility over a grid of every
+    # object (frustum.objects_visible_groups), valid while the grid's positions are pos_of.
+    # Kept only while vis_o is that pass's: a frame that tests objects otherwise drops it.
+    vis_groups: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Scheduler(SceneAPI):
@@ -490,8 +494,9 @@ class Scheduler(SceneAPI):
         # old one (it only sets a grid's extent, which may be larger than needed).
         objects_moved = same_origin and same_cams and orows is not None and 0 < orows.size
         vis_how = ""
+        vis_groups = None
         if objects_kept:
-            vis_o, box = c.vis_o, c.box
+            vis_o, box, vis_groups = c.vis_o, c.box, c.vis_groups
         elif objects_moved:
             vis_moved, box_moved = objects_visible(objs.bounds_min[orows], objs.bounds_max[orows],
                                                    frames.plane_n, frames.plane_p)
@@ -503,13 +508,22 @@ class Scheduler(SceneAPI):
               and orows.size == 0):
             # The objects of last frame's grid of every object, under moved cameras: its
             # group boxes first (those wholly in or out of view), then the objects of the
-            # groups on a frustum's planes.
+            # groups on a frustum's planes. After a pass over the same groups, those wholly
+            # in or out of view again keep their objects' flags.
             boxes = _group_boxes(c.grid, objs.bounds_min, objs.bounds_max, fast)
-            vis_o, box = objects_visible_groups(
+            last = c.vis_groups
+            since = last is not None and last[0] is c.grid.pos_of
+            vis_o, box, classes = objects_visible_groups(
                 boxes, frames.plane_n, frames.plane_p,
-                (c.grid.pos_of, c.grid.group_box, SWEEP_GROUP))
+                (c.grid.pos_of, c.grid.group_box, SWEEP_GROUP),
+                (c.vis_o, last[1] if since else _NO_CLASS))
+            vis_groups = (c.grid.pos_of, classes)
             vis_how = (f"; by the boxes of {SWEEP_GROUP} positions of last frame's grid of "
                        "every object first")
+            if since:
+                vis_how += (f", {np.count_nonzero(classes != last[1])} of {classes.size} "
+                            "groups changed class (the others' objects keep their flags, "
+                            "but those across a plane)")
         else:
             vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
                                          frames.plane_p)
@@ -909,7 +923,7 @@ class Scheduler(SceneAPI):
             packed=packed, grid=grid, seg=seg, heap=heap, used=used, pairs=n_pairs, live=live,
             shadow_of_row=shadow_of_row, fading=fading, shadows_settled=settled, frame=frame,
             casters=kept_casters, origin=origin, cands=cands,
-            light_grid=light_cells)
+            light_grid=light_cells, vis_groups=vis_groups)
         if not full:
             why = [f"{lrows.size} lights and {orows.size} objects changed",
                    "cameras " + ("unchanged" if same_cams else "moved")]
@@ -1513,6 +1527,10 @@ def _grid_plan(what: str, grid: tuple) -> str:
     g_f, dims, big_pos = grid[0], grid[1], grid[4]
     return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
+
+
+# A last group pass of none (frustum.objects_visible_groups).
+_NO_CLASS = np.zeros(0, np.int8)
 
 
 def _group_boxes(grid: _Grid, lo: np.ndarray, hi: np.ndarray, single: bool

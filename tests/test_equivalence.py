@@ -166,22 +166,28 @@ def test_one_frame_matches_oracle(sc):
 
 def _visibility_scene(cams: list, seed: int, n: int) -> tuple:
     """n boxes round an axis-aligned camera added to ``cams`` (zero-extent boxes, integer
-    coordinates on its planes), the cameras' frames, and the oracle's visibility and
-    planes."""
-    from lightsched.frustum import CameraFrames
-
+    coordinates on its planes), the cameras' frames, and the oracle's visibility."""
     rng = np.random.default_rng(seed)
-    cams = [*cams, ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0.0, 1.0]),
-                             up=np.array([0.0, 1.0, 0.0]), fov_y=math.pi / 2, aspect=1.0,
-                             near=1.0, far=20.0, id=len(cams))]
     centre = np.where(rng.random((n, 3)) < 0.5, rng.integers(-25, 26, (n, 3)),
                       rng.uniform(-30.0, 30.0, (n, 3))) + [0.0, 0.0, 10.0]
     half = np.where(rng.random((n, 3)) < 0.3, 0.0, rng.uniform(0.0, 4.0, (n, 3)))
     lo, hi = centre - half, centre + half
+    frames, want = _oracle_visibility(cams, lo, hi)
+    return rng, lo, hi, frames, want
+
+
+def _oracle_visibility(cams: list, lo: np.ndarray, hi: np.ndarray) -> tuple:
+    """The frames of ``cams`` and an axis-aligned camera at the origin looking along +z,
+    and the oracle's visibility of the boxes (lo, hi) from them."""
+    from lightsched.frustum import CameraFrames
+
+    cams = [*cams, ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0.0, 1.0]),
+                             up=np.array([0.0, 1.0, 0.0]), fov_y=math.pi / 2, aspect=1.0,
+                             near=1.0, far=20.0, id=len(cams))]
     planes = [ref.CameraFrame(c).planes for c in cams]
     want = np.array([any(ref.aabb_in_planes(p, tuple(lo[o]), tuple(hi[o])) for p in planes)
-                     for o in range(n)], bool)
-    return rng, lo, hi, CameraFrames(cams), want, planes
+                     for o in range(lo.shape[0])], bool)
+    return CameraFrames(cams), want
 
 
 @examples(1.0)
@@ -193,7 +199,7 @@ def test_object_visibility_matches_oracle(cams, seed, n):
     components), and the same bounding box of the visible objects."""
     from lightsched.frustum import objects_visible
 
-    _, lo, hi, f, want, _ = _visibility_scene(cams, seed, n)
+    _, lo, hi, f, want = _visibility_scene(cams, seed, n)
     vis, box = objects_visible(lo, hi, f.plane_n, f.plane_p)
     assert np.array_equal(vis, want)
     if want.any():
@@ -203,21 +209,24 @@ def test_object_visibility_matches_oracle(cams, seed, n):
 
 
 @examples(1.0)
-@given(cams=camera_list(), seed=st.integers(0, 2**32 - 1), n=st.sampled_from([1, 700, 3000]),
-       order=st.sampled_from(["cells", "random"]), by_row=st.booleans(),
-       size=st.sampled_from([4, 64]))
-def test_object_visibility_by_group_boxes_matches_oracle(cams, seed, n, order, by_row, size):
+@given(cams=camera_list(), cams2=camera_list(), seed=st.integers(0, 2**32 - 1),
+       n=st.sampled_from([1, 700, 3000]), order=st.sampled_from(["cells", "random"]),
+       by_row=st.booleans(), size=st.sampled_from([4, 64]))
+def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, order, by_row,
+                                                         size):
     """frustum.objects_visible_groups (a grid's group boxes first: those wholly inside a
     frustum, those in none, then the objects of the others) gives the oracle's visibility,
     with grid positions in cells (groups inside, outside and across the planes) or in
     random order (every group across them), boxes read by row or from records in grid
-    order, before and after some objects move within their group boxes, widened in place
-    (shadows.widen_group_boxes); its box holds the visible objects' and lies within the
+    order, over three passes: the cameras, others after some objects moved within their
+    group boxes, widened in place (shadows.widen_group_boxes), then the first ones again.
+    From the second pass on it is given the last pass's flags and classes too, and gives
+    the same as without them. Its box holds the visible objects' and lies within the
     group boxes."""
     from lightsched.frustum import objects_visible_groups
     from lightsched.shadows import group_boxes, widen_group_boxes
 
-    rng, lo, hi, f, want, planes = _visibility_scene(cams, seed, n)
+    rng, lo, hi, f, want = _visibility_scene(cams, seed, n)
     if order == "cells":
         cell = np.floor((lo + hi) / 2 / 6.0).astype(np.int64) + 8
         grid_rows = np.argsort((cell[:, 0] * 17 + cell[:, 1]) * 17 + cell[:, 2], kind="stable")
@@ -230,8 +239,9 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, seed, n, order, b
         gbox = np.array([np.concatenate([lo[grid_rows[v:v + size]].min(0),
                                          hi[grid_rows[v:v + size]].max(0)])
                          for v in range(0, n, size)])
-    for step in range(2):
-        if step:
+    last = (np.zeros(0, bool), np.zeros(0, np.int8))
+    for step, step_cams in enumerate([cams, cams2, cams]):
+        if step == 1:
             # Some objects move within their group's box, which takes in their new box.
             moved = rng.permutation(n)[:n // 4]
             shift = rng.uniform(-2.0, 2.0, (moved.size, 3))
@@ -244,16 +254,27 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, seed, n, order, b
                     g = pos_of[o] // size
                     gbox[g] = np.concatenate([np.minimum(gbox[g, :3], lo[o]),
                                               np.maximum(gbox[g, 3:], hi[o])])
-            want = np.array([any(ref.aabb_in_planes(p, tuple(lo[o]), tuple(hi[o]))
-                                 for p in planes) for o in range(n)], bool)
+        if step:
+            f, want = _oracle_visibility(step_cams, lo, hi)
         at = by_row_or_grid(lo, hi, grid_rows, by_row)
-        vis, box = objects_visible_groups(at, f.plane_n, f.plane_p, (pos_of, gbox, size))
+        vis, box, classes = objects_visible_groups(at, f.plane_n, f.plane_p,
+                                                   (pos_of, gbox, size), last)
         assert np.array_equal(vis, want), step
+        if step:
+            fresh = objects_visible_groups(at, f.plane_n, f.plane_p, (pos_of, gbox, size),
+                                           (np.zeros(0, bool), np.zeros(0, np.int8)))
+            for x, y in zip((vis, box, classes), fresh, strict=True):
+                assert np.array_equal(x, y), step
+        for g in range(gbox.shape[0]):
+            flags = vis[grid_rows[g * size:(g + 1) * size]]
+            assert classes[g] != 2 or flags.all()
+            assert classes[g] != 0 or not flags.any()
         if want.any():
             assert (box[:3] <= lo[want].min(0)).all() and (box[3:] >= hi[want].max(0)).all()
             assert (box[:3] >= gbox[:, :3].min(0)).all() and (box[3:] <= gbox[:, 3:].max(0)).all()
         else:
             assert np.array_equal(box, [np.inf] * 3 + [-np.inf] * 3)
+        last = (vis, classes)
 
 
 @examples(1.0)

@@ -784,17 +784,19 @@ def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
 def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     """A camera turning back and forth over a city: a grid of every object is kept, and the
     objects that leave or enter the view only get their record's mask word again; the
-    visibility tests its group boxes first. The lights entering and leaving the view find
-    the objects holding their pairs by walking the grid, not by a scan of every object's
-    pairs. Frames equal the oracle's, casters of shadowed point and spot lights among
-    invisible objects included, and those of a scheduler that builds everything anew."""
+    visibility tests its group boxes first, and from the third frame on rewrites only the
+    flags of the groups across a plane or whose class changed. The lights entering and
+    leaving the view find the objects holding their pairs by walking the grid, not by a
+    scan of every object's pairs. Frames equal the oracle's, casters of shadowed point and
+    spot lights among invisible objects included, and those of a scheduler that builds
+    everything anew."""
     scene = city(3_000, 300, seed=8, shadow_fraction=0.1)
     cfg = ls.Config(max_lights=4, shadow_budget=8)
     t, p = Twin(cfg), _Pair(cfg)
     for s in (t, p):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
-    updated, near, by_groups = [], [], []
+    updated, near, by_groups, since = [], [], [], []
     for i, angle in enumerate([0.0, 0.3, 0.6, 0.3, 0.0, 0.5, 0.1]):
         cams = [_turned_camera(scene.cameras[0], angle)]
         ff, _ = t.frame(cams)
@@ -807,16 +809,43 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
         found = re.search(r"the (\d+) flagged lights reach scanned", fa.stats["plan"]["lists"])
         near.append(int(found[1]) if found else 0)
         by_groups.append("grid of every object first" in fa.stats["plan"]["visibility"])
+        found = re.search(r"(\d+) of \d+ groups changed class", fa.stats["plan"]["visibility"])
+        since.append(int(found[1]) if found else None)
     assert not t.diverged
     assert near[0] == 0 and min(near[1:]) > 0, near
     if grid_kind == "every":
         assert updated[0] is None and all(u is not None for u in updated[1:]), t.plans
         assert min(updated[1:]) > 0 and max(updated[1:]) > 100, updated  # left and entered
         assert by_groups == [False] + [True] * 6, by_groups
+        assert since[:2] == [None] * 2 and min(since[2:]) > 0, since
         assert "the grid of every object" in ff.stats["plan"]["casters"]
     else:
         assert updated == [None] * 7, t.plans
         assert "invisible casting objects" in ff.stats["plan"]["casters"]
+
+
+def test_visibility_by_groups_starts_again_on_a_new_grid(grid_kind):
+    """The group pass of a moving camera keeps its groups' classes (in view, out of it,
+    across a plane) only while the grid's positions are the same: a frame whose lights'
+    radii grow threefold (cameras and objects still) builds a new grid of every object,
+    and the next turn of the camera tests every group as in a first pass. Frames equal
+    the oracle's."""
+    scene = city(3_000, 300, seed=8)
+    t = Twin(ls.Config(max_lights=4))
+    t.set_lights(**scene.lights)
+    t.set_objects(**scene.objects)
+    since, kept = [], []
+    for i, angle in enumerate([0.0, 0.3, 0.6, 0.6, 0.2, 0.5]):
+        if i == 3:
+            t.update_lights(id=scene.lights["id"], radius=3.0 * scene.lights["radius"])
+        f, _ = t.frame([_turned_camera(scene.cameras[0], angle)])
+        found = re.search(r"(\d+) of \d+ groups changed class", f.stats["plan"]["visibility"])
+        since.append(found is not None)
+        kept.append("(kept" in f.stats["plan"]["pairs"])
+    assert not t.diverged
+    if grid_kind == "every":
+        assert kept == [False, True, True, False, True, True], t.plans
+        assert since == [False, False, True, False, False, True], since
 
 
 @pytest.mark.parametrize("single", [False, True], ids=["float64", "float32"])
