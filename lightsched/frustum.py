@@ -119,22 +119,10 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
         for cam in range(plane_n.shape[0]):
             ok[:size] = True
             for j in range(6):
-                n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
-                q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
-                c0 = 3 if n0 >= 0.0 else 0
-                c1 = 4 if n1 >= 0.0 else 1
-                c2 = 5 if n2 >= 0.0 else 2
-                for i in range(size):
-                    # n . (x - q), summed in x, y, z order (DESIGN "Tests").
-                    d = (n0 * (col[c0, i] - q0) + n1 * (col[c1, i] - q1)
-                         + n2 * (col[c2, i] - q2))
-                    ok[i] = ok[i] & (d >= 0.0)
+                _plane_columns(plane_n, plane_p, (cam, j), col, size, ok)
             for i in range(size):
                 vis[i] = vis[i] | ok[i]
-        b = np.empty(6)
-        for a in range(3):
-            b[a] = np.inf
-            b[3 + a] = -np.inf
+        b = _hull(boxes, 0)
         for i in range(size):
             v = vis[i]
             out[a0 + i] = v
@@ -143,6 +131,25 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
                 b[3 + a] = max(b[3 + a], col[3 + a, i] if v else -np.inf)
         boxes[blk] = b
     return out, _hull(boxes, n_blocks)
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _plane_columns(plane_n, plane_p, plane, col, size, ok):
+    """ok[i] &= box i in columns col ([lo, hi] rows of 6) passes plane = (camera, j): its
+    corner farthest along the normal (column a + 3 on an axis where n >= 0) at a signed
+    distance n . (x - q), summed in x, y, z order (DESIGN "Tests"), >= 0. One loop without
+    branches over contiguous columns, which LLVM vectorises."""
+    cam, j = plane
+    n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
+    q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
+    c0 = 3 if n0 >= 0.0 else 0
+    c1 = 4 if n1 >= 0.0 else 1
+    c2 = 5 if n2 >= 0.0 else 2
+    for i in range(size):
+        d = n0 * (col[c0, i] - q0) + n1 * (col[c1, i] - q1) + n2 * (col[c2, i] - q2)
+        ok[i] = ok[i] & (d >= 0.0)
+
+
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -230,18 +237,8 @@ def _across(plane_n, plane_p, gbox, g, col, m, out):
             if not _plane_d(plane_n, plane_p, cam, j, gbox, g, True) >= 0.0:
                 ok[:m] = False
                 break
-            if _plane_d(plane_n, plane_p, cam, j, gbox, g, False) >= 0.0:
-                continue
-            n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
-            q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
-            c0 = 3 if n0 >= 0.0 else 0
-            c1 = 4 if n1 >= 0.0 else 1
-            c2 = 5 if n2 >= 0.0 else 2
-            for i in range(m):
-                # n . (x - q), summed in x, y, z order, as objects_visible.
-                d = (n0 * (col[c0, i] - q0) + n1 * (col[c1, i] - q1)
-                     + n2 * (col[c2, i] - q2))
-                ok[i] = ok[i] & (d >= 0.0)
+            if not _plane_d(plane_n, plane_p, cam, j, gbox, g, False) >= 0.0:
+                _plane_columns(plane_n, plane_p, (cam, j), col, m, ok)
         for i in range(m):
             seen[i] = seen[i] | ok[i]
 
@@ -304,10 +301,11 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
                         col[3 + a, i] = hi[p, a]
                 _across(plane_n, plane_p, gbox, g, col, m, (seen, ok))
                 for i in range(m):
-                    flags[rows[v0 + i] if since else v0 + i] = seen[i]
+                    hit = seen[i]
+                    flags[rows[v0 + i] if since else v0 + i] = hit
                     for a in range(3):
-                        b[a] = min(b[a], col[a, i] if seen[i] else np.inf)
-                        b[3 + a] = max(b[3 + a], col[3 + a, i] if seen[i] else -np.inf)
+                        b[a] = min(b[a], col[a, i] if hit else np.inf)
+                        b[3 + a] = max(b[3 + a], col[3 + a, i] if hit else -np.inf)
             elif c != (class_last[g] if since else OUT):
                 for v in range(v0, v1):
                     flags[rows[v] if since else v] = c == IN
