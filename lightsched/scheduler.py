@@ -43,6 +43,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import reduce
 from itertools import accumulate
 from typing import Any
 
@@ -1326,21 +1327,39 @@ class Scheduler(SceneAPI):
             holds, kept = np.zeros(n, np.uint8), np.zeros(0, np.int64)
             scanned = "no light flagged"
         few = int(fresh[2].sum()) <= FEW_PAIRS * n
+        rows1 = np.union1d(fresh_rows, left_rows)
         if few:
             w_obj, w_pairs = group_few(*fresh)
-            rewrite = (holds & WALKED) != 0
-            rewrite[w_obj] = True
         else:
             w_start, w_pairs = self._group(fresh, n)
-            rewrite = ((holds & WALKED) != 0) | (w_start[1:] > w_start[:-1])
-        mode = np.full(n, 2, np.int8)
-        mode[fresh_rows] = 1
-        mode[left_rows] = 0
-        rows1 = np.union1d(fresh_rows, left_rows)
-        rewrite[rows1] = False
-        rows2 = np.flatnonzero(rewrite)
+        if few and rows_near is not None and not cut:
+            # Only the objects near the flagged lights, the walk's objects and rows1 can
+            # change: the same rows as below, without its passes over every row (~0.6 ms
+            # at 1M objects).
+            near_holds = holds[rows_near]
+            rows2 = np.setdiff1d(np.union1d(rows_near[(near_holds & WALKED) != 0], w_obj),
+                                 rows1, assume_unique=True)
+            run = reduce(np.union1d, (rows_near[near_holds != 0], rows2, rows1,
+                                      np.flatnonzero(c.fading)))
+        else:
+            rewrite = (holds & WALKED) != 0
+            if few:
+                rewrite[w_obj] = True
+            else:
+                rewrite |= w_start[1:] > w_start[:-1]
+            rewrite[rows1] = False
+            rows2 = np.flatnonzero(rewrite)
+            run = (holds != 0) | rewrite | c.fading
+            run[rows1] = True
+            if cut:
+                run |= vis_o | c.vis_o
+            run = np.flatnonzero(run)
         if few:
             w_start = start_at(rows2, w_obj, n)
+        # replace_lists' modes: 2 (rows2) the kept pairs and the walk's, 1 the new lists of
+        # moved or newly visible objects, 0 none for those that left the view.
+        mode1 = np.ones(rows1.size, np.int8)
+        mode1[np.searchsorted(rows1, left_rows)] = 0
         o_start, o_pairs = fresh_obj
         # The cache is this frame's to change.
         seg, heap, used = _room(self._new_heap, c.seg, c.heap, c.used, c.pairs,
@@ -1351,16 +1370,12 @@ class Scheduler(SceneAPI):
         # object's took 0.5 ms at 1M objects).
         rewritten = (rows1, rows2)
         n_pairs = c.pairs - sum(int(seg[rows, 1].sum()) for rows in rewritten)
-        used = int(replace_lists(rows2, mode[rows2], (seg, heap), walked_flag, kept,
-                                 (w_start, w_pairs), used))
-        used = int(replace_lists(rows1, mode[rows1], (seg, heap), walked_flag, kept,
+        used = int(replace_lists(rows2, np.full(rows2.size, 2, np.int8), (seg, heap),
+                                 walked_flag, kept, (w_start, w_pairs), used))
+        used = int(replace_lists(rows1, mode1, (seg, heap), walked_flag, kept,
                                  (o_start, o_pairs), used))
         n_pairs += sum(int(seg[rows, 1].sum()) for rows in rewritten)
-        run = (holds != 0) | rewrite | c.fading
-        run[rows1] = True
-        if cut:
-            run |= vis_o | c.vis_o
-        return seg, (heap, used, n_pairs), np.flatnonzero(run), scanned
+        return seg, (heap, used, n_pairs), run, scanned
 
     def _casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                  lights_packed: tuple[np.ndarray, np.ndarray], grid: _Grid,
