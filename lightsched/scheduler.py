@@ -523,8 +523,8 @@ class Scheduler(SceneAPI):
                        "every object first")
             if since:
                 vis_how += (f", {np.count_nonzero(classes != last[1])} of {classes.size} "
-                            "groups changed class (the others' objects keep their flags, "
-                            "but those across a plane)")
+                            "groups changed class (only their objects' flags and those of "
+                            "the groups across a plane written)")
         else:
             vis_o, box = objects_visible(objs.bounds_min, objs.bounds_max, frames.plane_n,
                                          frames.plane_p)
@@ -589,11 +589,12 @@ class Scheduler(SceneAPI):
             # (Kept objects: the visibility is last frame's array; nothing entered or left.)
             fresh_rows = left_rows = np.zeros(0, np.int64)
         else:
-            fresh_rows = flipped[vis_o[flipped]]
             if orows.size:
                 moved = np.zeros(n, np.bool_)
                 moved[orows] = True
                 fresh_rows = np.flatnonzero(vis_o & (moved | ~c.vis_o))
+            else:
+                fresh_rows = flipped[vis_o[flipped]]
             left_rows = flipped[~vis_o[flipped]]
         if n and np.count_nonzero(vis_o) >= EVERY_OBJECT_SHARE * n:
             grid, grid_kept = self._every_grid(c, same_origin, (vis_o, flipped), orows, packed,

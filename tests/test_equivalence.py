@@ -223,7 +223,7 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
     From the second pass on it is given the last pass's flags and classes too, and gives
     the same as without them. Its box holds the visible objects' and lies within the
     group boxes."""
-    from lightsched.frustum import objects_visible_groups
+    from lightsched.frustum import IN, OUT, objects_visible_groups
     from lightsched.shadows import group_boxes, widen_group_boxes
 
     rng, lo, hi, f, want = _visibility_scene(cams, seed, n)
@@ -267,8 +267,8 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
                 assert np.array_equal(x, y), step
         for g in range(gbox.shape[0]):
             flags = vis[grid_rows[g * size:(g + 1) * size]]
-            assert classes[g] != 2 or flags.all()
-            assert classes[g] != 0 or not flags.any()
+            assert classes[g] != IN or flags.all()
+            assert classes[g] != OUT or not flags.any()
         if want.any():
             assert (box[:3] <= lo[want].min(0)).all() and (box[3:] >= hi[want].max(0)).all()
             assert (box[:3] >= gbox[:, :3].min(0)).all() and (box[3:] <= gbox[:, 3:].max(0)).all()
