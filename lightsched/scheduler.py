@@ -190,8 +190,11 @@ CANDIDATE_LISTS = True
 # before it 10k was +-0.08, so the threshold was 2^15).
 CANDIDATE_MIN_OBJECTS = 1 << 12
 
-# No directional light in the slots (pairs.candidate_pairs' dir_rows).
+# No rows: no directional light in the slots (pairs.candidate_pairs' dir_rows), no object
+# whose visibility changed.
 _NO_ROWS = np.zeros(0, np.int64)
+# A last group pass of none (frustum.objects_visible_groups).
+_NO_CLASS = np.zeros(0, np.int8)
 
 # The fields whose change alters an object's pairs (casts_shadows changes only casters).
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
@@ -633,13 +636,12 @@ class Scheduler(SceneAPI):
                        and n >= CANDIDATE_MIN_OBJECTS)
         cands = c.cands if cands_valid and c is not None else None
         if cands is not None and vis_o is not c.vis_o:
-            rows = flipped
-            if not cands.hidden and vis_o[rows].any():
+            if not cands.hidden and vis_o[flipped].any():
                 # Lists of the objects in view only: those entering it may lack lights.
                 cands = None
             else:
                 # The grid's records have theirs already (_every_grid).
-                cands.recs[1][rows, 6] = grid.vis[1][grid.pos_of[rows], 6]
+                cands.recs[1][flipped, 6] = grid.vis[1][grid.pos_of[flipped], 6]
         def cands_plan(built: bool, walk: np.ndarray) -> str:
             return (f"; candidate lists (each point and spot light's sphere widened by "
                     f"{SKIN:g} of its radius) " + ("made: " if built else "kept, ")
@@ -1559,10 +1561,6 @@ def _grid_plan(what: str, grid: tuple) -> str:
     g_f, dims, big_pos = grid[0], grid[1], grid[4]
     return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
-
-
-# A last group pass of none (frustum.objects_visible_groups).
-_NO_CLASS = np.zeros(0, np.int8)
 
 
 def _group_boxes(grid: _Grid, lo: np.ndarray, hi: np.ndarray, single: bool
