@@ -174,6 +174,22 @@ def copy_rows(src, dst, rows):
             dst[r, w] = src[r, w]
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def rows_not_in(rows, other):
+    """The rows of ``rows`` not in ``other`` (both int64, ascending, distinct), ascending:
+    a merge, where a mask of every row took three passes over it (at (100k, 10k) with 10%
+    of the lights moving, ~45k rows each, ~80 us of a frame's outputs)."""
+    out = np.empty(rows.shape[0], np.int64)
+    n = 0
+    t = 0
+    for r in rows:
+        while t < other.shape[0] and other[t] < r:
+            t += 1
+        out[n] = r
+        n += t == other.shape[0] or other[t] != r
+    return out[:n]
+
+
 def held_elsewhere(arrays: dict[str, np.ndarray]) -> bool:
     """Whether anything but the dict itself references one of the arrays (a Frame, a view
     of it, a buffer being sent): then they cannot be written again. CPython counts the

@@ -1468,6 +1468,28 @@ def list_objects(by_light, lights, mark):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
+def reached_rows(reach, visible, more):
+    """The rows of the objects an incremental frame reaches through the candidate lists
+    (``reach``, list_objects' marks) that are in view, whose pairs it makes again, and the
+    rows it runs the object pass on: those, and the rows ``more`` marks (fading ones).
+    Both ascending, int64, in one pass without branches: with ~45% of the rows reached
+    (lights10 at (100k, 10k)), np.flatnonzero of a mask mispredicts on nearly every other
+    row, and the two took ~0.23 ms of the frame (line profile)."""
+    n = reach.shape[0]
+    rows = np.empty(n, np.int64)
+    run = np.empty(n, np.int64)
+    a = 0
+    b = 0
+    for o in range(n):
+        hit = reach[o] & visible[o]
+        rows[a] = o
+        a += hit
+        run[b] = o
+        b += hit | more[o]
+    return rows[:a], run[:b]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def light_lists(walked, by_light, used):
     """Each walked light's objects (walked = light_pass's rows, offsets, count, object
     rows) appended to the lists by light row (by_light = (seg [L, 2], object rows [H]))

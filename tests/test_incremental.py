@@ -18,7 +18,13 @@ from test_equivalence import big_scene, configs
 
 import lightsched as ls
 from lightsched import scheduler
-from lightsched.pairs import compact_light_lists, visible_objects, widen_walkers
+from lightsched.frame import rows_not_in
+from lightsched.pairs import (
+    compact_light_lists,
+    reached_rows,
+    visible_objects,
+    widen_walkers,
+)
 from lightsched.scenes import city, move_lights
 from lightsched.simd import SHOWN
 
@@ -1032,3 +1038,23 @@ def test_a_frame_that_stops_half_way_leaves_no_cache_behind(monkeypatch):
     monkeypatch.undo()
     f, _ = t.frame(cams)
     assert _plan(f) == "full: the last frame stopped half way", f.stats["plan"]
+
+
+@examples(0.5)
+@given(seed=st.integers(0, 2**32 - 1), n=st.sampled_from([0, 1, 7, 300]),
+       share=st.sampled_from([0.0, 0.02, 0.45, 1.0]))
+def test_the_rows_of_a_lists_frame_are_those_of_their_masks(seed, n, share):
+    """reached_rows (the rows whose pairs a lists frame makes again, and those it runs the
+    object pass on) and rows_not_in (the rows of the outputs taken back that lag this
+    frame's and it does not write) == numpy on masks of every density: each row kept or
+    not by its mask alone, ascending, none twice."""
+    rng = np.random.default_rng(seed)
+    reach, visible, more = (rng.uniform(size=(3, n)) < [[share], [0.9], [share / 3]])
+    rows, run = reached_rows(reach.view(np.uint8), visible.view(np.uint8),
+                             more.view(np.uint8))
+    assert rows.dtype == run.dtype == np.int64
+    assert np.array_equal(rows, np.flatnonzero(reach & visible))
+    assert np.array_equal(run, np.flatnonzero((reach & visible) | more))
+    lag = np.flatnonzero(rng.uniform(size=n) < share)
+    for written in (run, rows, lag, lag[::2], np.zeros(0, np.int64)):
+        assert np.array_equal(rows_not_in(lag, written), np.setdiff1d(lag, written))
