@@ -555,15 +555,13 @@ def widen_group_boxes(boxes, lo, hi, rows, pos_of):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v, first):
-    """Bits of the volumes of camera k that box v of [lo, hi] is in: the camera's shared
-    planes (kept in its first volume), then each cascade's own, by ``_plane_ok``. With
-    ``first``, only whether it is in any (the lowest such bit)."""
+def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v):
+    """Whether box v of [lo, hi] is in any volume of camera k: the camera's shared planes
+    (kept in its first volume), then each cascade's own, by ``_plane_ok``."""
     b0 = k * n_casc
     for i in range(shared[t, k]):
         if not _plane_ok(vn, vq, t, b0, i, lo, hi, v):
-            return np.uint32(0)
-    acc = np.uint32(0)
+            return False
     for c in range(n_casc):
         b = b0 + c
         ok = True
@@ -572,10 +570,8 @@ def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v, first):
                 ok = False
                 break
         if ok:
-            acc |= np.uint32(1) << np.uint32(b)
-            if first:
-                return acc
-    return acc
+            return True
+    return False
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
@@ -584,9 +580,9 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
     group of SWEEP_GROUP grid positions whose box ``gbox`` (group_boxes) is in none of a
     light's volumes holds no caster of it and is skipped; the boxes of the others take the
     test plane by plane, copied into columns (_block_masks, as sweep_casters' blocks). at =
-    (lo, hi, rows, by_row) as in group_boxes (rows: the object row of
-    each position). Returns (offsets [T + 1], object rows, caster masks): light t's casters
-    at offsets[t]..offsets[t+1]-1, rows ascending, the nonzero entries of sweep_casters'.
+    (lo, hi, rows, by_row) as in group_boxes (rows: the object row of each position).
+    Returns (offsets [T + 1], object rows, caster masks): light t's casters at
+    offsets[t]..offsets[t+1]-1, rows ascending, the nonzero entries of sweep_casters'.
 
     Exact, not approximate: each plane test is the same float64 expression at the box
     corner farthest along the normal, and every operation in it (a difference, a product
@@ -623,11 +619,10 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
             m = min(nv, v0 + SWEEP_GROUP) - v0
             copied = False
             for t in range(n_t):
-                hit = np.uint32(0)
+                hit = False
                 for k in range(n_cam):
-                    if hit == 0:
-                        hit = _in_sweep(vn, vq, vm, shared, t, k, n_casc, g_lo, g_hi, g, True)
-                if hit == 0:
+                    hit = hit or _in_sweep(vn, vq, vm, shared, t, k, n_casc, g_lo, g_hi, g)
+                if not hit:
                     continue
                 through[t, g] = True
                 if not copied:
