@@ -823,7 +823,7 @@ class Scheduler(SceneAPI):
             list_objects(cands.by_light, reselect, reach)
             # The visibility is last frame's: an object out of view has no pairs. (As
             # bytes: the kernel's loop on bools took ~35% longer.)
-            more = c.fading | vis_o | c.vis_o if cut else c.fading
+            more = (c.fading | vis_o | c.vis_o) if cut else c.fading
             rows, run = reached_rows(reach.view(np.uint8), vis_o.view(np.uint8),
                                      more.view(np.uint8))
             c_seg, _, c_j, _ = cands.lists

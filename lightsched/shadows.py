@@ -611,8 +611,9 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
         # sweep_casters' blocks are (box by box, an early exit a plane, the ~3-4k objects
         # of a (10k, 1k) or (100k, 10k) frame's ~50 such groups took ~0.15 ms).
         box = np.empty((6, SWEEP_GROUP))
-        masks = (np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.bool_),
-                 np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.uint32))
+        base, in_cam, inside = (np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.bool_),
+                                np.empty(SWEEP_GROUP, np.bool_))
+        acc = np.empty(SWEEP_GROUP, np.uint32)
         leads = (np.full(vm.shape, -1, np.int64), np.full(shared.shape, -1, np.int64))
         for g in range(part, n_g, n_parts):
             v0 = g * SWEEP_GROUP
@@ -632,7 +633,6 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
                             box[a, r] = lo[p, a]
                             box[3 + a, r] = hi[p, a]
                     copied = True
-                base, in_cam, inside, acc = masks
                 for r in range(m):
                     o = rows[v0 + r]
                     base[r] = casts[o] and (np.int64(omask[o]) & lmask[t]) != 0
