@@ -15,52 +15,35 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .fields import FIELDS, FIELDS_BY_NAME, PER_OBJECT_NAMES, axis_size
 from .jit import PRANGE_ONLY
 
-# name -> (dtype, shape suffix kind): "N" per object, "NK" per object slot, others 1-D.
-FRAME_ARRAYS: dict[str, Any] = {
-    "object_id": np.int32,
-    "visible": np.bool_,
-    "count": np.int32,
-    "candidates": np.int32,
-    "light_ids": np.int32,
-    "light_index": np.int32,
-    "priority": np.float32,
-    "fade_weight": np.float32,
-    "fade_state": np.uint8,
-    "slot_shadow": np.int8,
-    "directional_lights": np.int32,
-    "visible_lights": np.int32,
-    "shadow_lights": np.int32,
-    "shadow_tier": np.uint16,
-    "cascade_splits": np.float64,
-    "caster_offsets": np.int64,
-    "caster_ids": np.int32,
-    "caster_masks": np.uint32,
-}
-
+# name -> dtype, DESIGN section 3's order (fields.FIELDS).
+FRAME_ARRAYS: dict[str, Any] = {f.name: f.dtype for f in FIELDS}
 
 # The word types row_words tiles rows with, widest first, with their sizes in bytes.
 _WORDS = ((8, np.uint64), (4, np.uint32), (2, np.uint16))
 
+# The order pairs.object_pass takes its output arrays in (after "visible", its input), which
+# is the scheduler's; fields.py owns the rest.
+_OBJECT_PASS_ORDER = ("visible", "light_ids", "light_index", "priority", "fade_weight",
+                      "fade_state", "count", "candidates", "slot_shadow")
+if sorted(_OBJECT_PASS_ORDER) != sorted(PER_OBJECT_NAMES):
+    raise RuntimeError("frame._OBJECT_PASS_ORDER must name fields.py's per-object arrays")
+
 # Per-object arrays: dtype, shape ("N" or "NK") and the value of an empty slot (DESIGN
-# section 3), in the order pairs.object_pass writes them (after "visible").
+# section 3), in the order pairs.object_pass writes them.
 PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
-    "visible": (np.bool_, "N", False),
-    "light_ids": (np.int32, "NK", -1),
-    "light_index": (np.int32, "NK", -1),
-    "priority": (np.float32, "NK", 0),
-    "fade_weight": (np.float32, "NK", 0),
-    "fade_state": (np.uint8, "NK", 0),
-    "count": (np.int32, "N", 0),
-    "candidates": (np.int32, "N", 0),
-    "slot_shadow": (np.int8, "NK", -1),
-}
+    name: (FIELDS_BY_NAME[name].dtype, FIELDS_BY_NAME[name].kind, FIELDS_BY_NAME[name].empty)
+    for name in _OBJECT_PASS_ORDER}
 
 
 @dataclass
 class Frame:
-    """One frame's result. Object rows are in ascending object id (DESIGN section 3)."""
+    """One frame's result. Object rows are in ascending object id (DESIGN section 3).
+
+    The arrays are fields.FIELDS, written out so that editors and type checkers see
+    them (tests/test_frame.py holds the two equal)."""
 
     object_id: np.ndarray
     visible: np.ndarray
@@ -96,13 +79,9 @@ def freeze(frame: Frame) -> Frame:
 
 def _empty(name: str, n: int, k: int, cascades: int) -> np.ndarray:
     """One array of a frame where no object has a light (DESIGN section 3 empty slots)."""
-    dtype = FRAME_ARRAYS[name]
-    if name in PER_OBJECT:
-        _, kind, fill = PER_OBJECT[name]
-        return np.full((n,) if kind == "N" else (n, k), fill, dtype)
-    if name == "cascade_splits":
-        return np.zeros((0, cascades + 1), dtype)
-    return np.zeros(1 if name == "caster_offsets" else 0, dtype)
+    f = FIELDS_BY_NAME[name]
+    shape = tuple(axis_size(axis, n, k, cascades) for axis in f.shape)
+    return np.full(shape, f.empty if f.per_object else 0, f.dtype)
 
 
 def empty_frame(ids: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:

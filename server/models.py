@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, create_model
 
-from lightsched.frame import FRAME_ARRAYS
+from lightsched.fields import FIELDS, FRAME_FIELDS
 from lightsched.scene import CHANGE_OPS, LIGHT_FIELDS, OBJECT_FIELDS
 
 WIRE_ARRAY_SCHEMA = {
@@ -30,7 +31,7 @@ WIRE_ARRAY_SCHEMA = {
 }
 # Arrays reach the models already decoded (numpy) or as lists; the core validates them.
 WireArray = Annotated[Any, WithJsonSchema(WIRE_ARRAY_SCHEMA)]
-OutputName = Literal[tuple(FRAME_ARRAYS)]  # type: ignore[valid-type]
+OutputName = Literal[FRAME_FIELDS]  # type: ignore[valid-type]
 
 STRICT = ConfigDict(extra="forbid", strict=True, arbitrary_types_allowed=True)
 
@@ -61,10 +62,11 @@ class ConfigModel(BaseModel):
 
 
 class CameraModel(BaseModel):
-    """lightsched.Camera (DESIGN section 1)."""
+    """lightsched.Camera (DESIGN section 1); a camera without an id takes its position in
+    the list."""
 
     model_config = STRICT
-    id: int = 0
+    id: int | None = None
     position: WireArray
     forward: WireArray
     up: WireArray
@@ -138,33 +140,26 @@ class SessionInfo(BaseModel):
     idle_seconds: float
 
 
-class FrameResponse(BaseModel):
-    """A frame (DESIGN section 3) with the arrays asked for. With changed_only, ``rows`` are
-    the object ids whose per-object arrays follow (in ``rows`` order), and ``object_id`` is
-    present only when the object set changed."""
-
+class _FrameHead(BaseModel):
     frame_index: int
     changed_only: bool = False
     rows: WireArray | None = None
     stats: dict[str, Any] | None = None
-    object_id: WireArray | None = None
-    visible: WireArray | None = None
-    count: WireArray | None = None
-    candidates: WireArray | None = None
-    light_ids: WireArray | None = None
-    light_index: WireArray | None = None
-    priority: WireArray | None = None
-    fade_weight: WireArray | None = None
-    fade_state: WireArray | None = None
-    slot_shadow: WireArray | None = None
-    directional_lights: WireArray | None = None
-    visible_lights: WireArray | None = None
-    shadow_lights: WireArray | None = None
-    shadow_tier: WireArray | None = None
-    cascade_splits: WireArray | None = None
-    caster_offsets: WireArray | None = None
-    caster_ids: WireArray | None = None
-    caster_masks: WireArray | None = None
+
+
+def _array_doc(f: Any) -> str:
+    shape = ", ".join(f.shape)
+    empty = f"; empty: {f.empty!r}" if f.per_object else ""
+    return f"{f.description} ({np.dtype(f.dtype).name} [{shape}]{empty})"
+
+
+# The arrays are lightsched.fields' (also schemas/frame_fields.json), in its order.
+FrameResponse = create_model(
+    "FrameResponse", __base__=_FrameHead,
+    __doc__="A frame (DESIGN section 3) with the arrays asked for. With changed_only, ``rows`` "
+            "are the object ids whose per-object arrays follow (in ``rows`` order), and "
+            "``object_id`` is present only when the object set changed.",
+    **{f.name: (WireArray | None, Field(None, description=_array_doc(f))) for f in FIELDS})
 
 
 class ProblemModel(BaseModel):

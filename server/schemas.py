@@ -1,8 +1,9 @@
-"""schemas/: the JSON Schema of every request and response (from models.py) and the golden
-examples, request/response pairs in both encodings that the server's and every client's
-tests replay byte for byte.
+"""schemas/: the JSON Schema of every request and response (from models.py), the frame's
+field list (frame_fields.json, from lightsched.fields; the Python client ships a copy) and
+the golden examples, request/response pairs in both encodings that the server's and every
+client's tests replay byte for byte.
 
-    python -m lightsched_server.schemas          # rewrite schemas/*.schema.json and examples/
+    python -m lightsched_server.schemas          # rewrite schemas/ and the client's copy
     python -m lightsched_server.schemas --check  # exit 1 if the committed files drifted
 """
 
@@ -19,10 +20,15 @@ from lightsched_client.client import _Changes, camera_doc, config_doc, fields_do
 from lightsched_client.wire import JSON, MSGPACK, dumps, loads
 
 import lightsched as ls
+from lightsched.fields import fields_json
 
 from .models import SCHEMAS
 
-ROOT = Path(__file__).resolve().parent.parent / "schemas"
+REPO = Path(__file__).resolve().parent.parent
+ROOT = REPO / "schemas"
+# The client package reads the field list as package data, from its own folder: it cannot
+# reach schemas/ once installed.
+CLIENT_FIELDS = REPO / "clients" / "python" / "lightsched_client" / "frame_fields.json"
 ENCODINGS = {"msgpack": MSGPACK, "json": JSON}
 
 
@@ -34,6 +40,12 @@ def schema_files() -> dict[str, bytes]:
         schema["$id"] = f"urn:lightsched:schema:v1:{name}"
         out[f"{name}.schema.json"] = (json.dumps(schema, indent=2, sort_keys=True) + "\n").encode()
     return out
+
+
+def field_files() -> dict[Path, bytes]:
+    """schemas/frame_fields.json and the client package's copy (no server needed)."""
+    data = fields_json().encode()
+    return {ROOT / "frame_fields.json": data, CLIENT_FIELDS: data}
 
 
 # The golden scene: a point light, a shadowed spot, a shadowed sun; four boxes; one camera.
@@ -140,7 +152,8 @@ def all_files() -> dict[str, bytes]:
 
     server = ServerThread()
     try:
-        return {**schema_files(), **example_files(http_send(server.url))}
+        return {**schema_files(), "frame_fields.json": fields_json().encode(),
+                **example_files(http_send(server.url))}
     finally:
         server.stop()
 
@@ -149,17 +162,18 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--check", action="store_true", help="fail if schemas/ differs")
     args = p.parse_args(argv)
-    files = all_files()
-    drift = [name for name, data in files.items()
-             if not (ROOT / name).exists() or (ROOT / name).read_bytes() != data]
+    files = {ROOT / name: data for name, data in all_files().items()} | field_files()
+    drift = [path for path, data in files.items()
+             if not path.exists() or path.read_bytes() != data]
     if args.check:
-        for name in drift:
-            print(f"schemas/{name} differs from what the code generates", file=sys.stderr)
+        for path in drift:
+            print(f"{path.relative_to(REPO)} differs from what the code generates",
+                  file=sys.stderr)
         return 1 if drift else 0
-    for name in drift:
-        (ROOT / name).parent.mkdir(parents=True, exist_ok=True)
-        (ROOT / name).write_bytes(files[name])
-        print(f"wrote schemas/{name}")
+    for path in drift:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(files[path])
+        print(f"wrote {path.relative_to(REPO)}")
     return 0
 
 

@@ -26,3 +26,35 @@ def test_frames_are_read_only_snapshots(cls):
         s.frame(sc.cameras, dt=0.1)
     for name, arr in first.arrays().items():
         np.testing.assert_array_equal(arr, kept[name], err_msg=name)
+
+
+def test_frame_fields_are_the_one_field_list():
+    """lightsched.fields lists the arrays once; the Frame dataclass, FRAME_ARRAYS and
+    PER_OBJECT (the object pass's order, which the scheduler relies on) follow it."""
+    import dataclasses
+
+    from lightsched.fields import FIELDS, FRAME_FIELDS, PER_OBJECT_NAMES
+    from lightsched.frame import FRAME_ARRAYS, PER_OBJECT, empty_frame
+
+    names = [f.name for f in FIELDS]
+    assert list(FRAME_FIELDS) == names
+    assert [f.name for f in dataclasses.fields(ls.Frame)] == names + ["stats"]
+    assert list(FRAME_ARRAYS) == names
+    assert FRAME_ARRAYS == {f.name: f.dtype for f in FIELDS}
+    assert list(PER_OBJECT) == ["visible", "light_ids", "light_index", "priority",
+                                "fade_weight", "fade_state", "count", "candidates",
+                                "slot_shadow"]
+    assert sorted(PER_OBJECT) == sorted(PER_OBJECT_NAMES)
+    assert PER_OBJECT["light_ids"] == (np.int32, "NK", -1)
+    assert PER_OBJECT["visible"] == (np.bool_, "N", False)
+    assert PER_OBJECT["slot_shadow"] == (np.int8, "NK", -1)
+    f = empty_frame(np.array([4, 9, 12], np.int32), k=3, cascades=2)
+    shapes = {"object_id": (3,), "visible": (3,), "count": (3,), "candidates": (3,),
+              "cascade_splits": (0, 3), "caster_offsets": (1,)}
+    for field in FIELDS:
+        a = getattr(f, field.name)
+        assert a.dtype == np.dtype(field.dtype), field.name
+        want = shapes.get(field.name, (3, 3) if field.shape == ("N", "K") else (0,))
+        assert a.shape == want, field.name
+        if field.per_object:
+            assert (a == field.empty).all(), field.name

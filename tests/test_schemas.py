@@ -5,6 +5,7 @@ scheduler's frames."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -40,6 +41,25 @@ def test_committed_files_match_the_code():
     stale = {p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if p.is_file()} \
         - set(files) - {"wire.md"}
     assert not stale, f"files no generator writes: {sorted(stale)}"
+
+
+def test_frame_field_files_match_lightsched_fields():
+    """schemas/frame_fields.json and the client package's copy are what lightsched.fields
+    generates (python -m lightsched_server.schemas writes both), and the client's names,
+    empty values and Frame fields come from it."""
+    from lightsched_client import client
+
+    from lightsched.fields import FIELDS, FRAME_FIELDS, fields_json
+
+    for path, data in schemas.field_files().items():
+        assert path.exists(), f"{path} is missing"
+        assert path.read_text("utf-8") == data.decode() == fields_json(), \
+            f"{path} drifted from lightsched/fields.py"
+    names = [f.name for f in FIELDS]
+    assert client.FRAME_FIELDS == FRAME_FIELDS == tuple(names)
+    assert client.PER_OBJECT == {f.name: f.empty for f in FIELDS if f.per_object}
+    assert [f.name for f in dataclasses.fields(client.Frame)] == names + ["stats", "frame_index"]
+    assert client.Frame().light_ids is None and client.Frame().stats == {}
 
 
 @pytest.mark.parametrize("ext,encoding", [("msgpack", MSGPACK), ("json", JSON)])

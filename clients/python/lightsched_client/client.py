@@ -17,7 +17,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import http.client
-from dataclasses import dataclass, field
+import json
+from dataclasses import field, make_dataclass
+from importlib import resources
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -27,42 +29,23 @@ from websockets.exceptions import ConnectionClosed
 
 from .wire import JSON, MSGPACK, dumps, loads, media_type
 
-FRAME_FIELDS = ("object_id", "visible", "count", "candidates", "light_ids", "light_index",
-                "priority", "fade_weight", "fade_state", "slot_shadow", "directional_lights",
-                "visible_lights", "shadow_lights", "shadow_tier", "cascade_splits",
-                "caster_offsets", "caster_ids", "caster_masks")
+# The frame's arrays (DESIGN section 3), generated from lightsched.fields: this package
+# does not import lightsched (numba is heavy).
+FIELDS: tuple[dict[str, Any], ...] = tuple(json.loads(
+    resources.files(__package__).joinpath("frame_fields.json").read_text("utf-8"))["fields"])
+FRAME_FIELDS: tuple[str, ...] = tuple(f["name"] for f in FIELDS)
 # Per-object arrays and their empty-slot value (DESIGN section 3).
-PER_OBJECT = {"visible": False, "count": 0, "candidates": 0, "light_ids": -1, "light_index": -1,
-              "priority": 0, "fade_weight": 0, "fade_state": 0, "slot_shadow": -1}
+PER_OBJECT: dict[str, Any] = {f["name"]: f["empty"] for f in FIELDS if f["per_object"]}
 CAMERA_FIELDS = ("id", "position", "forward", "up", "fov_y", "aspect", "near", "far", "focus",
                  "height_px")
 
-
-@dataclass
-class Frame:
-    """One frame (DESIGN section 3): the arrays asked for (others None), stats, and the
-    session's frame index."""
-
-    object_id: np.ndarray | None = None
-    visible: np.ndarray | None = None
-    count: np.ndarray | None = None
-    candidates: np.ndarray | None = None
-    light_ids: np.ndarray | None = None
-    light_index: np.ndarray | None = None
-    priority: np.ndarray | None = None
-    fade_weight: np.ndarray | None = None
-    fade_state: np.ndarray | None = None
-    slot_shadow: np.ndarray | None = None
-    directional_lights: np.ndarray | None = None
-    visible_lights: np.ndarray | None = None
-    shadow_lights: np.ndarray | None = None
-    shadow_tier: np.ndarray | None = None
-    cascade_splits: np.ndarray | None = None
-    caster_offsets: np.ndarray | None = None
-    caster_ids: np.ndarray | None = None
-    caster_masks: np.ndarray | None = None
-    stats: dict[str, Any] = field(default_factory=dict)
-    frame_index: int = 0
+Frame = make_dataclass(
+    "Frame",
+    [(name, np.ndarray | None, None) for name in FRAME_FIELDS]
+    + [("stats", dict[str, Any], field(default_factory=dict)), ("frame_index", int, 0)])
+Frame.__module__ = __name__
+Frame.__doc__ = """One frame (DESIGN section 3): the arrays asked for (others None), stats, and
+the session's frame index. Its array fields are FRAME_FIELDS."""
 
 
 class RemoteError(Exception):
