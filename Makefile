@@ -7,10 +7,14 @@ STAMP := $(VENV)/.installed
 
 .PHONY: test run lint bench bench-quick clean
 
-$(STAMP): pyproject.toml clients/python/pyproject.toml
+# The root distribution ships lightsched_client too (the server's wire codec): a venv made
+# before it did has the client's own distribution as well, which is dropped so that only one
+# distribution owns the package.
+$(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip
-	$(BIN)/python -m pip install -e clients/python -e '.[dev]'
+	$(BIN)/python -m pip uninstall -y -q lightsched-client
+	$(BIN)/python -m pip install -e '.[dev]'
 	touch $(STAMP)
 
 lint: $(STAMP)

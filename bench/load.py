@@ -64,7 +64,7 @@ try:
     from lightsched_client.client import _Changes
     from lightsched_client.wire import dumps, loads
 except ImportError as e:  # pragma: no cover - environment problem
-    sys.exit(f"bench/load.py needs the client package (pip install -e clients/python): {e}")
+    sys.exit(f"bench/load.py needs the client package (pip install -e '.[server]'): {e}")
 
 HERE = Path(__file__).resolve().parent
 BEGIN, END = markers("load.py")

@@ -67,7 +67,7 @@ try:
     from lightsched_client.client import frame_of
     from lightsched_client.wire import MSGPACK, dumps, loads
 except ImportError as e:  # pragma: no cover - environment problem
-    sys.exit(f"bench/service.py needs the client package (pip install -e clients/python): {e}")
+    sys.exit(f"bench/service.py needs the client package (pip install -e '.[server]'): {e}")
 
 HEADERS = {"Content-Type": MSGPACK, "Accept": MSGPACK}
 TRANSPORTS = ("HTTP", "WebSocket")

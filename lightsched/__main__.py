@@ -184,8 +184,8 @@ def run_serve(args: argparse.Namespace) -> int:
     try:
         from lightsched_server import serve
     except ImportError as e:
-        print(f"lightsched serve needs the server extra (pip install 'lightsched[server]' and "
-              f"clients/python): {e}", file=sys.stderr)
+        print(f"lightsched serve needs the server extra (pip install 'lightsched[server]'): {e}",
+              file=sys.stderr)
         return 2
     serve(args.host, args.port, demo=not args.no_demo, log_level=args.log_level,
           warm_up=not args.no_warm_up)

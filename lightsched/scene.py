@@ -12,10 +12,11 @@ Directions are normalised here, once, so the fast path and the oracle see the sa
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import operator
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -140,7 +141,7 @@ class Camera:
     far: float
     focus: Any = (0.0, 0.0)
     height_px: float = 1080.0
-    id: int = 0
+    id: int | None = None  # None: the camera's position in the frame's list
 
 
 _CAMERA_FIELDS = ("id", "position", "forward", "up", "fov_y", "aspect", "near", "far",
@@ -179,7 +180,9 @@ def validate_cameras(cameras: Any) -> list[Camera]:
     """Returns validated copies (numpy vectors, float scalars) of 1..8 cameras.
 
     Accepts Camera instances or mappings with Camera's field names. The error field is
-    ``cameras.<field>`` and the index the camera's position in the list.
+    ``cameras.<field>`` and the index the camera's position in the list. A camera without
+    an id gets its position as its id (DESIGN section 1); ids must still be unique, so
+    [id 1, no id] is rejected at index 1.
     """
     if isinstance(cameras, (Camera, dict)):
         cameras = [cameras]
@@ -202,11 +205,12 @@ def validate_cameras(cameras: Any) -> list[Camera]:
             c = Camera(**c)
         elif not isinstance(c, Camera):
             raise ValidationError("cameras", i, f"must be a Camera or a mapping, got {type(c).__name__}")
-        cid = c.id
+        cid = i if c.id is None else c.id
         if isinstance(cid, bool) or not isinstance(cid, (int, np.integer)) or not 0 <= cid <= INT32_MAX:
             raise ValidationError("cameras.id", i, "must be a non-negative int32")
         if int(cid) in seen:
-            raise ValidationError("cameras.id", i, f"duplicate camera id {cid}")
+            given = "" if c.id is not None else " (a camera without an id takes its position)"
+            raise ValidationError("cameras.id", i, f"duplicate camera id {cid}{given}")
         seen.add(int(cid))
         if _sealed(c):
             out.append(c)
@@ -826,6 +830,8 @@ class SceneAPI:
         self.lights = LightStore()
         self.objects = ObjectStore()
         self.frame_index = 0
+        # Buffers ``transaction`` copies the per-object state into, by state name.
+        self._spare_state: dict[str, np.ndarray] = {}
 
     # lights
     def set_lights(self, **fields: Any) -> None:
@@ -881,6 +887,40 @@ class SceneAPI:
         """Puts back a ``snapshot`` (the scene, not the frame state of frames since)."""
         self.lights, self.objects = saved
 
+    @contextlib.contextmanager
+    def transaction(self) -> Iterator[None]:
+        """Scene changes and frames inside happen all or nothing: when the block raises, the
+        scene, the per-object state, the config and the frame index are put back as they
+        were, and the exception goes on (the service runs each request in one).
+
+        Stores copy on write, so references keep most of it. The per-object state arrays a
+        frame writes in place (the writeable ones; read-only ones are replaced whole) are
+        copied, into buffers kept from the last transaction: a 10k-object scene with K = 8
+        copies ~1 MB (~50 us). What a subclass keeps beside the stores is not put back: the
+        fast Scheduler drops its last-frame cache when a frame stops half way (its next
+        frame is then a full one), but a frame that returned keeps its cache and its
+        shadowed set. So a block ends with its frame, as the service's do."""
+        lights, objects = self.snapshot()
+        frame_index, config = self.frame_index, self.config
+        spare, self._spare_state = self._spare_state, {}
+        copied: dict[str, np.ndarray] = {}
+        for name, (arr, fill) in objects.state.items():
+            if arr.flags.writeable:
+                buf = spare.get(name)
+                if buf is None or buf.shape != arr.shape or buf.dtype != arr.dtype:
+                    buf = np.empty_like(arr)
+                np.copyto(buf, arr)
+                objects.state[name] = (buf, fill)
+                copied[name] = buf
+        try:
+            yield
+        except BaseException:
+            self.restore((lights, objects))
+            self.frame_index, self.config = frame_index, config
+            raise
+        # Nothing else references the copies: the next transaction copies into them.
+        self._spare_state = copied
+
     def frame(self, cameras: Any, dt: float = 1.0 / 60.0, cut: bool = False) -> Any:
         """Steps one frame (DESIGN section 2) and returns its Frame (section 3)."""
         cams = validate_cameras(cameras)
@@ -890,7 +930,9 @@ class SceneAPI:
         result = self._frame(cams, dt_, bool(cut))
         self.lights.touched = ()
         self.objects.touched = ()
-        self.objects.is_new[:] = False
+        # Replaced, not cleared in place: a snapshot (``transaction``) may share the array.
+        if self.objects.is_new.any():
+            self.objects.is_new = np.zeros_like(self.objects.is_new)
         self.frame_index += 1
         return result
 

@@ -3,7 +3,8 @@
 Bodies are read as bytes and decoded by Content-Type (application/msgpack, or
 application/json for debugging); responses follow Accept (else the request's encoding,
 else JSON). Every refusal is a problem document (RFC 9457) in the response's encoding, with
-a 4xx status; a frame that fails changes nothing in its session.
+a 4xx status (500 for a frame that fails by a fault of the service); a frame that fails
+changes nothing in its session.
 
 The two hot routes, ``POST /v1/sessions/{sid}/frames`` and the stream, are FastAPI routes
 (for /docs and OpenAPI) whose endpoints App.__call__ also calls directly: a frame skips

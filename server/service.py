@@ -3,7 +3,8 @@ documents out. app.py translates HTTP and WebSocket traffic to these calls.
 
 A frame request runs in this order: structure check (models.py), camera and dt check,
 the scene changes all or nothing (``Scheduler.apply``), the per-session size limits, the
-frame. Anything refused raises a Problem and leaves the session as it was. Frames of one
+frame. Anything refused raises a Problem and leaves the session as it was; so does a frame
+that fails (a 500 problem: ``SceneAPI.transaction`` puts the session back). Frames of one
 session run one at a time in arrival order (an asyncio lock, FIFO); the compute runs in a
 worker thread (the numba kernels release the GIL), so different sessions run in parallel.
 """
@@ -11,6 +12,7 @@ worker thread (the numba kernels release the GIL), so different sessions run in 
 from __future__ import annotations
 
 import asyncio
+import logging
 import secrets
 import time
 from dataclasses import dataclass, field
@@ -23,7 +25,8 @@ from pydantic import BaseModel
 from pydantic import ValidationError as PydanticError
 
 import lightsched as ls
-from lightsched.frame import FRAME_ARRAYS, changed_rows
+from lightsched.fields import FRAME_FIELDS, PER_OBJECT_NAMES
+from lightsched.frame import changed_rows
 from lightsched.scene import validate_cameras, validate_dt
 
 from .metrics import Metrics
@@ -31,13 +34,13 @@ from .models import FrameRequest, ScheduleRequest, SessionRequest
 from .problems import Problem, invalid, not_found
 from .settings import Settings
 
-PER_OBJECT = ("visible", "count", "candidates", "light_ids", "light_index", "priority",
-              "fade_weight", "fade_state", "slot_shadow")
+# The arrays changed_only sends by rows.
+PER_OBJECT = frozenset(PER_OBJECT_NAMES)
+log = logging.getLogger(__name__)
 SWEEP = 1.0  # seconds between sweeps for idle sessions on lookups
 # What "changed" means for changed_only: the set, its order, weights and states (DESIGN's
 # per-object outputs except priority, which moves whenever a light does).
-CHANGE_KEYS = ("visible", "count", "candidates", "light_ids", "light_index", "fade_weight",
-               "fade_state", "slot_shadow")
+CHANGE_KEYS = tuple(name for name in PER_OBJECT_NAMES if name != "priority")
 
 
 def parse(model: type[BaseModel], doc: Any) -> Any:
@@ -79,7 +82,7 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
                    prev: ls.Frame | None = None, stats: bool = True) -> dict[str, Any]:
     """The response map of a frame: the arrays asked for (all by default) and stats; with
     ``prev`` (changed_only), per-object arrays only for the changed rows."""
-    names = list(FRAME_ARRAYS) if outputs is None else [n for n in FRAME_ARRAYS if n in outputs]
+    names = FRAME_FIELDS if outputs is None else [n for n in FRAME_FIELDS if n in outputs]
     doc: dict[str, Any] = {"frame_index": frame_index, "changed_only": prev is not None}
     if prev is None:
         for name in names:
@@ -198,20 +201,33 @@ class Service:
 
     def _step(self, s: Session, req: Any, cams: list[ls.Camera], dt: float) -> dict[str, Any]:
         sched = s.scheduler
-        before = sched.snapshot()
         try:
-            sched.apply([(c.op, c.fields) for c in req.changes])
-        except ls.ValidationError as e:
-            raise invalid(e) from None
-        limits = self.settings
-        for what, n, cap in (("lights", len(sched.lights), limits.max_lights),
-                             ("objects", len(sched.objects), limits.max_objects)):
-            if n > cap:
-                sched.restore(before)
-                raise Problem(413, "too-large", "Scene too large",
-                              f"a session holds at most {cap} {what}; this frame would make "
-                              f"{n}", field=what)
-        f = self._run_frame(sched, cams, dt, req.cut)
+            # The changes and the frame, all or nothing: whatever stops them (a refusal or a
+            # fault of the frame itself) leaves the scene, the fade state and the frame index
+            # as they were; s.prev is set only below.
+            with sched.transaction():
+                try:
+                    sched.apply([(c.op, c.fields) for c in req.changes])
+                except ls.ValidationError as e:
+                    raise invalid(e) from None
+                limits = self.settings
+                for what, n, cap in (("lights", len(sched.lights), limits.max_lights),
+                                     ("objects", len(sched.objects), limits.max_objects)):
+                    if n > cap:
+                        raise Problem(413, "too-large", "Scene too large",
+                                      f"a session holds at most {cap} {what}; this frame "
+                                      f"would make {n}", field=what)
+                f = self._run_frame(sched, cams, dt, req.cut)
+        except Problem:
+            raise
+        except Exception as e:
+            # A fault, not the request's: logged with its traceback for the operator, and
+            # answered as a problem document so that the session (unchanged) and a stream
+            # carry on.
+            log.exception("frame of session %s failed; the session is as it was", s.id)
+            raise Problem(500, "internal", "Internal error",
+                          f"the frame failed ({type(e).__name__}); nothing in the session "
+                          "changed") from e
         self.metrics.observe_frame(f.stats)
         doc = frame_document(f, req.outputs, sched.frame_index - 1,
                              s.prev if req.changed_only else None, req.stats)

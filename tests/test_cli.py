@@ -102,3 +102,30 @@ def test_serve_then_a_client_drives_the_demo_session():
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def test_server_extra_ships_and_declares_the_wire_codec():
+    """`pip install ".[server]"` alone gives a server that starts: the root distribution
+    ships lightsched_client (the server's wire codec) with its package data, and the
+    server extra names every dependency of the client distribution. (An install into a
+    fresh venv needs the network, so that one is checked by hand.)"""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    project = tomllib.loads((root / "pyproject.toml").read_text())
+    client = tomllib.loads((root / "clients" / "python" / "pyproject.toml").read_text())
+    tool = project["tool"]["setuptools"]
+    for package in ("lightsched", "lightsched_server", "lightsched_client"):
+        assert package in tool["packages"], package
+        assert (root / tool["package-dir"][package] / "__init__.py").is_file(), package
+    source = root / tool["package-dir"]["lightsched_client"]
+    for data in client["tool"]["setuptools"]["package-data"]["lightsched_client"]:
+        assert data in tool["package-data"]["lightsched_client"], data
+        assert (source / data).is_file(), data
+
+    def names(requirements):
+        return {re.split(r"[<>=!~\[; ]", r, maxsplit=1)[0].lower() for r in requirements}
+
+    assert names(client["project"]["dependencies"]) <= \
+        names(project["project"]["dependencies"] + project["project"]["optional-dependencies"]["server"])

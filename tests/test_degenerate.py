@@ -480,3 +480,37 @@ def test_spot_whose_inner_and_outer_cosines_round_equal():
     assert fast.light_ids[0, :2].tolist() == oracle.light_ids[0, :2].tolist() == [1, 2]
     assert fast.priority[0, 0] == oracle.priority[0, 0] == oracle.priority[0, 1]
     assert np.isfinite(fast.priority).all()
+
+
+@pytest.mark.parametrize("ulps", [0, 3], ids=["inner == outer", "inner 3 ulps below"])
+def test_spot_with_equal_cosines_uses_the_step_profile(ulps):
+    """DESIGN section 2: when cos(inner) == cos(outer) in float64, s = [c >= cos o]: an
+    object just inside the cone gets the full light (P equal to a point light's of the
+    same position, radius and intensity: s = 1), one just outside none, in the fast path
+    and the oracle alike. A ramp from an inner angle a little smaller would give s < 1
+    there."""
+    outer = 0.05
+    inner = outer
+    for _ in range(ulps):
+        inner = float(np.nextafter(inner, 0.0))
+    assert math.cos(inner) == math.cos(outer) and (inner != outer) == (ulps > 0)
+    apex, along = 10.0, 5.0
+    inside = along * math.tan(outer * 0.98)  # centre at 0.98 outer: c > cos(outer)
+    outside = along * math.tan(outer * 1.1)
+    h = 1e-3
+    objs = dict(id=[0, 1],
+                bounds_min=[[inside - h, -h, apex + along - h], [outside - h, -h, apex + along - h]],
+                bounds_max=[[inside + h, h, apex + along + h], [outside + h, h, apex + along + h]])
+    cam = ls.Camera(position=[0, 0, 0], forward=[0, 0, 1], up=[0, 1, 0], fov_y=1.0, aspect=1.0,
+                    near=0.1, far=100.0)
+    light = dict(id=[1], position=[[0.0, 0.0, apex]], radius=[20.0], intensity=[3.0])
+    spot = dict(light, type=[1], direction=[[0.0, 0.0, 1.0]], outer_angle=[outer],
+                inner_angle=[inner])
+    ramp = dict(spot, inner_angle=[outer * 0.9])
+    point = ref.schedule(dict(light, type=[0]), objs, [cam])
+    assert point.count.tolist() == [1, 1]
+    for impl in (ls, ref):
+        f = impl.schedule(spot, objs, [cam])
+        assert f.count.tolist() == [1, 0] and f.candidates.tolist() == [1, 0], impl.__name__
+        assert f.priority[0, 0] == point.priority[0, 0], impl.__name__
+        assert impl.schedule(ramp, objs, [cam]).priority[0, 0] < point.priority[0, 0]

@@ -23,6 +23,7 @@ from live import LiveServer
 
 import lightsched as ls
 from lightsched.frame import FRAME_ARRAYS
+from lightsched.scene import LIGHT_FIELDS, OBJECT_FIELDS, ObjectStore
 from lightsched.scenes import city, move_lights
 
 SCENE = city(300, 40, seed=1, shadow_fraction=0.2, sun_shadows=True)
@@ -360,6 +361,95 @@ def test_scene_over_session_limits_is_413_and_changes_nothing(limited):
         assert e.value.status == 413 and e.value.problem["field"] == "objects"
         info = s.info()
         assert (info["lights"], info["objects"], info["frame_index"]) == (30, 0, 1)
+
+
+def session_state(sched):
+    """Copies of everything a frame request may change in a session's scheduler: the
+    stores, the per-object (fade) state, the config and the frame index."""
+    return {"lights": {f: getattr(sched.lights, f).copy() for f in LIGHT_FIELDS},
+            "objects": {f: getattr(sched.objects, f).copy() for f in OBJECT_FIELDS},
+            "is_new": sched.objects.is_new.copy(),
+            "state": {name: arr.copy() for name, (arr, _) in sched.objects.state.items()},
+            "config": sched.config, "frame_index": sched.frame_index}
+
+
+def assert_same_state(a, b):
+    assert a.keys() == b.keys()
+    for key in a:
+        if isinstance(a[key], dict):
+            assert a[key].keys() == b[key].keys(), key
+            for name in a[key]:
+                x, y = a[key][name], b[key][name]
+                assert x.dtype == y.dtype and np.array_equal(x, y), (key, name)
+        elif isinstance(a[key], np.ndarray):
+            assert np.array_equal(a[key], b[key]), key
+        else:
+            assert a[key] == b[key], key
+
+
+@pytest.mark.parametrize("stream", [False, True], ids=["http", "websocket"])
+@pytest.mark.parametrize("fault", ["frame raises", "after the object pass"])
+def test_frame_that_fails_changes_nothing(server, monkeypatch, fault, stream):
+    """The changes of a request are applied, then its frame fails: a 500 problem document,
+    and the session is as before the request (scene, fade state, config, frame index, the
+    previous frame changed_only compares with), so its next frames equal those of an
+    embedded scheduler that never saw the request. "after the object pass" fails once the
+    frame has written the fade state in place (at ObjectStore.put, which comes next)."""
+    twin = ls.Scheduler(CONFIG)
+    with Client(server.url) as c:
+        s = c.session(CONFIG, stream=stream)
+        for sched in (s, twin):
+            sched.set_lights(**SCENE.lights)
+            sched.set_objects(**SCENE.objects)
+        for i in range(1, 4):  # moving lights: slots fade in and out
+            for sched in (s, twin):
+                sched.update_lights(id=SCENE.lights["id"], position=move_lights(SCENE.lights, i))
+            assert_same_frame(s.frame(SCENE.cameras, dt=0.05), twin.frame(SCENE.cameras, dt=0.05),
+                              f"frame {i}")
+        session = server.service.sessions[s.id]
+        sched = session.scheduler
+        before, prev = session_state(sched), session.prev
+        wrote = []
+        if fault == "frame raises":
+            def broken_frame(*args, **kwargs):
+                raise RuntimeError("injected fault")
+
+            monkeypatch.setattr(sched, "frame", broken_frame)
+        else:
+            put = ObjectStore.put
+
+            def broken_put(store, name, value):
+                monkeypatch.setattr(ObjectStore, "put", put)  # once
+                weight = store.get("slot_weight")
+                assert weight.shape == before["state"]["slot_weight"].shape
+                wrote.append(not np.array_equal(weight, before["state"]["slot_weight"]))
+                raise RuntimeError("injected fault")
+
+            monkeypatch.setattr(ObjectStore, "put", broken_put)
+        # Updates only: the objects keep their rows, so the frame writes the very state
+        # arrays the session held (a set_ or remove_ would make new ones).
+        s.update_lights(id=SCENE.lights["id"], position=move_lights(SCENE.lights, 9))
+        s.update_objects(id=SCENE.objects["id"][:5], bounds_max=SCENE.objects["bounds_max"][:5] + 2)
+        with pytest.raises(RemoteError) as e:
+            s.frame([MOVED], dt=0.05, changed_only=True)
+        assert e.value.status == 500 and e.value.problem["type"].endswith(":internal")
+        monkeypatch.undo()
+        assert wrote == ([] if fault == "frame raises" else [True])
+        assert server.service.sessions[s.id] is session and session.scheduler is sched
+        assert_same_state(session_state(sched), before)
+        assert session.prev is prev
+        # The session goes on as the twin that never saw the failed request; changed_only
+        # answers (rows changed since session.prev) rebuild its frames.
+        for i in range(4, 6):
+            for x in (s, twin):
+                x.update_lights(id=SCENE.lights["id"], position=move_lights(SCENE.lights, i))
+            got, want = s.frame(SCENE.cameras, dt=0.05, changed_only=True), \
+                twin.frame(SCENE.cameras, dt=0.05)
+            for name in FRAME_ARRAYS:
+                if name != "priority":  # not part of "changed"
+                    assert np.array_equal(getattr(got, name), getattr(want, name)), (i, name)
+        assert s.info()["frame_index"] == 5
+        s.close()
 
 
 def test_session_count_and_idle_ttl():

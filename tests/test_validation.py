@@ -917,6 +917,75 @@ def test_duplicate_camera_ids(s):
     rejects(s, s.frame, "cameras.id", 2, [camera(id=3), camera(id=1), camera(id=3)])
 
 
+def test_cameras_without_ids_take_their_position(sched_cls):
+    """DESIGN section 1: a camera given without an id takes its position in the list (two
+    of them are cameras 0 and 1, not a duplicate 0); explicit unique ids are kept."""
+    from lightsched.scene import validate_cameras
+
+    plain = {"position": [2.0, 1.0, 5.0], "forward": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0],
+             "fov_y": 1.0, "aspect": 1.0, "near": 0.1, "far": 100.0}
+    assert [c.id for c in validate_cameras([camera(), camera(), plain])] == [0, 1, 2]
+    assert [c.id for c in validate_cameras([camera(id=7), camera(id=3)])] == [7, 3]
+    assert [c.id for c in validate_cameras([camera(id=5), camera()])] == [5, 1]
+    frames = []
+    for cams in ([camera(), plain], [camera(id=0), {**plain, "id": 1}]):
+        s = sched_cls(Config())
+        s.set_lights(**light_kwargs())
+        s.set_objects(**object_kwargs())
+        frames.append(s.frame(cams))
+    for name, a in frames[0].arrays().items():
+        assert np.array_equal(a, getattr(frames[1], name)), name
+
+
+def test_camera_without_id_must_not_take_a_given_id(s):
+    """[id 1, no id]: the second camera's id would be 1 again, rejected naming cameras.id
+    and index 1 (and likewise a given id after a camera that took it)."""
+    err = rejects(s, s.frame, "cameras.id", 1, [camera(id=1), camera()])
+    assert "without an id" in err.message
+    rejects(s, s.frame, "cameras.id", 1, [camera(), camera(id=0)])
+
+
+def test_transaction_puts_back_changes_and_a_frame_that_fails(monkeypatch):
+    """SceneAPI.transaction (the service runs each frame request in one): a block that
+    raises leaves the scene, the fade state written in place, the config and the frame
+    index as before it, and the frames go on as those of a twin that never ran it."""
+    from lightsched.scene import ObjectStore
+    from lightsched.scenes import city, move_lights
+
+    sc = city(300, 40, seed=1)
+    a, twin = ls.Scheduler(Config(max_lights=4)), ls.Scheduler(Config(max_lights=4))
+    for x in (a, twin):
+        x.set_lights(**sc.lights)
+        x.set_objects(**sc.objects)
+        x.frame(sc.cameras, dt=0.05)
+    ids = sc.lights["id"]
+    with a.transaction():  # kept: no exception
+        a.update_lights(id=ids, position=move_lights(sc.lights, 1))
+        a.frame(sc.cameras, dt=0.05)
+    twin.update_lights(id=ids, position=move_lights(sc.lights, 1))
+    twin.frame(sc.cameras, dt=0.05)
+    before = snapshot(a)
+    put, wrote = ObjectStore.put, []
+
+    def broken_put(store, name, value):
+        monkeypatch.setattr(ObjectStore, "put", put)  # once: after the object pass
+        wrote.append(not np.array_equal(store.get("slot_weight"),
+                                        before["objects.state.slot_weight"]))
+        raise RuntimeError("injected fault")
+
+    monkeypatch.setattr(ObjectStore, "put", broken_put)
+    with pytest.raises(RuntimeError, match="injected"), a.transaction():
+        a.update_lights(id=ids, position=move_lights(sc.lights, 2))
+        a.frame(sc.cameras, dt=0.05)
+    assert wrote == [True]  # the fade weights were written in place, then put back
+    assert_same(before, snapshot(a))
+    for x in (a, twin):
+        x.update_lights(id=ids, position=move_lights(sc.lights, 3))
+    got, want = a.frame(sc.cameras, dt=0.05), twin.frame(sc.cameras, dt=0.05)
+    for name, arr in got.arrays().items():
+        assert np.array_equal(arr, getattr(want, name)), name
+
+
 def test_camera_mappings(s):
     good = dict(position=[0, 0, 0], forward=[0, 0, -1], up=[0, 1, 0], fov_y=1.0, aspect=1.0,
                 near=0.1, far=10.0)
