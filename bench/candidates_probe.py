@@ -40,15 +40,17 @@ import numpy as np
 from common import parse_sizes, say
 from kernel_profile import capture, fresh
 
-from lightsched.pairs import GROUP_PARTS, _pair_p, group_pairs, light_bounds, light_pass
-from lightsched.priority import box_d2
+from lightsched.group import group_pairs
+from lightsched.jit import GROUP_PARTS
+from lightsched.priority import box_d2, record_pair_p
 from lightsched.scene import DIRECTIONAL
+from lightsched.walk import light_bounds, light_pass
 
 
 @nb.njit(nogil=True, inline="always", error_model="numpy")
 def _candidate_pairs(v, a, b, cand, lights, recs, out, m, params):
     """The pairs of the object at grid position v among its candidate lights cand[a:b]:
-    the exact Affects test and P (pairs._pair_p), appended to out = (P, light row) at m
+    the exact Affects test and P (priority.record_pair_p), appended to out = (P, light row) at m
     (range test only when params[3] is 0). Returns the new m."""
     hot, lf = lights
     vis_box, vis_bits = recs
@@ -67,7 +69,7 @@ def _candidate_pairs(v, a, b, cand, lights, recs, out, m, params):
             continue
         d2 = box_d2(vis_box, v, hot[j, 0], hot[j, 1], hot[j, 2])
         if d2 <= hot[j, 3] * hot[j, 3]:
-            hit, p = _pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int) \
+            hit, p = record_pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int) \
                 if with_p else (True, d2)
             if hit:
                 out_p[m] = p

@@ -35,47 +35,82 @@ import subprocess
 import sys
 import tempfile
 import time
+import types
 from typing import Any
 
 import numpy as np
 from common import parse_sizes, say
 
 import lightsched
-import lightsched.scheduler as scheduler_module
+import lightsched.scheduler  # noqa: F401 - imports every stage's module
 from lightsched.scenes import city, move_lights
+from lightsched.tuning import Tuning
 
 WINDOW = 128  # bytes of code per reported window
-# Kernels only the candidate lists' frames call (scheduler._candidates).
+# Kernels only the candidate lists' frames call (candidates.update_candidates and the pair
+# cache made from the lists, pair_cache._from_candidates).
 CANDIDATE_KERNELS = ("candidate_pairs", "edit_candidates", "light_lists", "spread_lists",
                      "compact_light_lists", "list_room")
 
 
+def _code_names(code: types.CodeType) -> set[str]:
+    """The global names a function's code (and the functions nested in it) reads."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _code_names(const)
+    return names
+
+
+def callers(kernel: str) -> list[types.ModuleType]:
+    """The modules of lightsched whose Python code calls ``kernel`` by that global name
+    (the stages call their kernels from Python; a kernel's own calls are compiled in)."""
+    found = []
+    for name, mod in sorted(sys.modules.items()):
+        if not name.startswith("lightsched.") or mod is None or kernel not in vars(mod):
+            continue
+        funcs = []
+        for obj in vars(mod).values():
+            if isinstance(obj, type) and obj.__module__ == name:
+                funcs += [f for f in vars(obj).values() if isinstance(f, types.FunctionType)]
+            elif isinstance(obj, types.FunctionType) and obj.__module__ == name:
+                funcs.append(obj)
+        if any(kernel in _code_names(f.__code__) for f in funcs):
+            found.append(mod)
+    return found
+
+
 def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[Any, tuple]:
-    """The kernel (as the scheduler calls it) and its arguments on the last of ``frames``
-    full frames (every light moving) of city(n_objects, n_lights). Such frames take their
-    pairs from candidate lists from the second on; but for the candidate kernels, they
-    are captured with the lists off, walking every light as a frame without them does."""
-    kern = getattr(scheduler_module, kernel)
+    """The kernel (as the scheduler's stages call it) and its arguments at its last call,
+    on the last of ``frames`` full frames (every light moving) of city(n_objects, n_lights).
+    Such frames take their pairs from candidate lists from the second on; but for the
+    candidate kernels, they are captured with the lists off (Tuning.candidate_lists),
+    walking every light as a frame without them does."""
+    mods = callers(kernel)
+    if not mods:
+        raise SystemExit(f"no module of lightsched calls a kernel named {kernel}")
+    kern = getattr(mods[0], kernel)
+    assert all(getattr(m, kernel) is kern for m in mods), f"{kernel}: two kernels of that name"
     seen: dict[str, tuple] = {}
-    lists = scheduler_module.CANDIDATE_LISTS
 
     def grab(*args):
         seen["args"] = args
         return kern(*args)
 
-    setattr(scheduler_module, kernel, grab)
-    scheduler_module.CANDIDATE_LISTS = kernel in CANDIDATE_KERNELS
+    for m in mods:
+        setattr(m, kernel, grab)
     try:
         scene = city(n_objects, n_lights, seed=0)
-        s = lightsched.Scheduler(lightsched.Config(max_lights=8))
+        s = lightsched.Scheduler(lightsched.Config(max_lights=8),
+                                 Tuning(candidate_lists=kernel in CANDIDATE_KERNELS))
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
         for i in range(frames):
             s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, i + 1))
             s.frame(scene.cameras, dt=1 / 60)
     finally:
-        setattr(scheduler_module, kernel, kern)
-        scheduler_module.CANDIDATE_LISTS = lists
+        for m in mods:
+            setattr(m, kernel, kern)
     if "args" not in seen:
         raise SystemExit(f"{kernel} was not called in a full frame")
     return kern, seen["args"]
@@ -149,7 +184,8 @@ def listing(ips: list[int], share: float) -> tuple[list[tuple[int, int, str]], i
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kernel", default="object_pass",
-                    help="a kernel the scheduler calls (lightsched.scheduler's name for it)")
+                    help="a kernel the scheduler's stages call (the name its module calls "
+                         "it by)")
     ap.add_argument("--size", default="10k:1k", help="N:L of the city")
     ap.add_argument("--frames", type=int, default=6, help="frames before the capture")
     ap.add_argument("--seconds", type=float, default=5.0, help="sampling time")

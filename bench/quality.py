@@ -69,10 +69,10 @@ from tqdm import tqdm
 
 import lightsched
 import lightsched.reference as ref
-import lightsched.scheduler as sched_mod
 from lightsched import Camera, Config
 from lightsched.scene import DIRECTIONAL, POINT, SPOT, SceneAPI
 from lightsched.scenes import DT, CityScene, city, move_lights
+from lightsched.tuning import Tuning
 
 BEGIN, END = markers("quality.py")
 
@@ -520,7 +520,7 @@ def stadium_scene(n_objects: int, n_lights: int, seed: int) -> tuple[CityScene, 
 
 @dataclass(frozen=True)
 class Run:
-    """A fast-path configuration: Config keywords and the grid cell (CELL_PER_RADIUS)."""
+    """A fast-path configuration: Config keywords and the grid cell (Tuning.cell_per_radius)."""
 
     name: str
     config: tuple[tuple[str, Any], ...] = ()
@@ -592,16 +592,6 @@ def distinct_runs(rows: list[Run]) -> dict[tuple, Run]:
     return out
 
 
-@contextlib.contextmanager
-def cell_per_radius(value: float) -> Iterator[None]:
-    old = sched_mod.CELL_PER_RADIUS
-    sched_mod.CELL_PER_RADIUS = value
-    try:
-        yield
-    finally:
-        sched_mod.CELL_PER_RADIUS = old
-
-
 @dataclass
 class Acc:
     """Sums of one selection's metrics over a sequence."""
@@ -658,7 +648,9 @@ class Acc:
 
 
 def new_scheduler(cls: type, r: Run, scene: CityScene) -> Any:
-    s = cls(r.make_config())
+    """A scheduler of ``cls`` with the run's Config (and, a fast one, its grid cell)."""
+    s = (cls(r.make_config(), Tuning(cell_per_radius=r.cell)) if cls is lightsched.Scheduler
+         else cls(r.make_config()))
     s.set_lights(**scene.lights)
     s.set_objects(**scene.objects)
     return s
@@ -699,8 +691,7 @@ def metrics_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: 
         cams = camera_at(scene.cameras, i)
         out = {}
         for key, s in scheds.items():
-            with cell_per_radius(runs[key].cell):
-                out[key] = s.frame(cams, dt=DT)
+            out[key] = s.frame(cams, dt=DT)
             plans[key] = dict(out[key].stats.get("plan", {}))
         f0 = next(iter(out.values()))
         visible = np.asarray(f0.visible)
@@ -759,10 +750,9 @@ def timing_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: i
                 key = keys[(i + j) % len(keys)]
                 s = scheds[key]
                 apply_changes(s, todo)
-                with cell_per_radius(runs[key].cell):
-                    t0 = time.perf_counter()
-                    s.frame(cams, dt=DT)
-                    t = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                s.frame(cams, dt=DT)
+                t = time.perf_counter() - t0
                 if i >= warmup:
                     times[key].append(t)
             bar.update()
@@ -798,8 +788,7 @@ def oracle_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: i
             ref_frames[cfg] = s.frame(cams, dt=DT)
             oracle_ms.append((time.perf_counter() - t0) * 1e3)
         for key, s in scheds.items():
-            with cell_per_radius(runs[key].cell):
-                f = s.frame(cams, dt=DT)
+            f = s.frame(cams, dt=DT)
             fr = ref_frames[runs[key].key[0]]
             vis = np.asarray(fr.visible)
             vis_mismatch[key] += int(np.count_nonzero(vis != np.asarray(f.visible)))

@@ -10,12 +10,53 @@ moved compares a few rows. Cameras are compared as one key of their parameters.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .frame import row_words, rows_differ
-from .scene import Camera
+from .scene import LIGHT_FIELDS, OBJECT_FIELDS, Camera
+
+# The object fields whose change alters an object's pairs (casts_shadows changes only
+# casters).
+PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
+
+
+@dataclass(frozen=True)
+class Changes:
+    """What differs from the last frame's scene. ``lights`` and ``objects``: the stores'
+    arrays this frame reads (the next frame compares against them); the rows are None
+    when there is no last frame or a set_/remove_ call renumbered either kind (then all
+    three are None): ``light_rows`` changed in any field, ``object_rows`` in a field of
+    PAIR_OBJECT_FIELDS, ``cast_rows`` in casts_shadows; ``light_fields``: the light fields
+    whose arrays were replaced (update_ or set_ calls), which the packing reads."""
+
+    lights: dict[str, np.ndarray]
+    objects: dict[str, np.ndarray]
+    light_rows: np.ndarray | None = None
+    object_rows: np.ndarray | None = None
+    cast_rows: np.ndarray | None = None
+    light_fields: tuple[str, ...] = LIGHT_FIELDS
+    # Why the rows are None: "lights" or "objects" (the set changed), "" (no last frame).
+    renumbered: str = ""
+
+
+def find_changes(last: Changes | None, lights: Any, objects: Any) -> Changes:
+    """This frame's Changes against the scene the last frame read (``last``, or None)."""
+    now_l = {f: getattr(lights, f) for f in LIGHT_FIELDS}
+    now_o = {f: getattr(objects, f) for f in OBJECT_FIELDS}
+    if last is None:
+        return Changes(now_l, now_o)
+    lrows = changed_rows(last.lights, lights, LIGHT_FIELDS)
+    if lrows is None:
+        return Changes(now_l, now_o, renumbered="lights")
+    orows = changed_rows(last.objects, objects, PAIR_OBJECT_FIELDS)
+    if orows is None:
+        return Changes(now_l, now_o, renumbered="objects")
+    cast = changed_rows(last.objects, objects, ("id", "casts_shadows"))
+    fields = tuple(f for f in LIGHT_FIELDS if last.lights[f] is not now_l[f])
+    return Changes(now_l, now_o, lrows, orows, cast, fields)
 
 
 def camera_key(cameras: list[Camera]) -> np.ndarray:

@@ -10,10 +10,12 @@ results are bit-identical to the oracle and translation-invariant on the 2^-16 m
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
+from .changes import camera_key, same_key
 from .jit import PRANGE_ONLY
 from .scene import DIRECTIONAL, Camera
 
@@ -69,6 +71,29 @@ class CameraFrames:
 
     def __len__(self) -> int:
         return self.position.shape[0]
+
+
+@dataclass(frozen=True)
+class Cameras:
+    """The cameras stage's output: every parameter of the cameras as one key
+    (changes.camera_key), their frames and cascade_splits, and whether they differ from
+    last frame's (if not, last frame's frames and splits are these)."""
+
+    key: np.ndarray
+    frames: CameraFrames
+    splits: np.ndarray
+    moved: bool
+
+
+def frame_cameras(cameras: list[Camera], last: Cameras | None, cascades: int,
+                  shadow_distance: float) -> Cameras:
+    """The cameras stage: the frames and splits of ``cameras`` (validated), last frame's
+    when they did not move."""
+    key = camera_key(cameras)
+    if last is not None and same_key(key, last.key):
+        return Cameras(key, last.frames, last.splits, False)
+    return Cameras(key, CameraFrames(cameras),
+                   cascade_splits(cameras, cascades, shadow_distance), True)
 
 
 def cascade_splits(cameras: list[Camera], cascades: int, shadow_distance: float) -> np.ndarray:

@@ -21,3 +21,9 @@ from numba.core.cpu import ParallelOptions
 PRANGE_ONLY = ParallelOptions({"prange": True, "comprehension": False, "reduction": False,
                                "inplace_binop": False, "setitem": False, "numpy": False,
                                "stencil": False, "fusion": False})
+
+# How the parallel kernels split their work: objects per work item (the object pass, the
+# records, the candidates), and the independent runs of a counting sort (each with its own
+# histogram) when grouping pairs or ordering objects by cell.
+OBJECT_CHUNK = 256
+GROUP_PARTS = 2

@@ -1,53 +1,99 @@
-"""Shadowed lights: ranking, resolution tiers, culling volumes, casters and slot_shadow
-(DESIGN section 2, "Shadowed lights", "Casters" and "slot_shadow").
+"""Shadowed lights (DESIGN section 2, "Shadowed lights" and "slot_shadow"): the ranking
+with its hysteresis, the resolution tiers, the "skip" rule's live lights, and per object
+slot which shadow map it samples.
 
-Takes the packed lights and cameras, which lights are candidates (visible, shadows = true,
-affecting a visible object: pairs.py counts that) and last frame's shadowed lights with
-their tiers; returns this frame's shadow lights in rank order with their tiers, their
-culling volumes (``culling_volumes``), per shadowed light its casters as (object rows
-ascending, caster_masks), and per object slot which shadow map it samples.
-
-Where the fused copies live: slot_shadow's rule (``pick_slot_shadows``) is inlined into
-pairs.object_pass; the caster test of a point or spot light (``caster_bits``) runs inside
-pairs.grid_casters, which walks the same object grids as the light pass; directional
-casters are a parallel scan over every object (``sweep_casters``), since their influence
-volume is everything, or, over a grid of every object, over boxes round runs of its
-positions first (``sweep_groups``): a shadow distance keeps few of them.
-
-Volumes are convex plane sets (normal, point) [.., MAX_PLANES, 3] with a plane count; the
-normals of the added edge planes are not normalised (the AABB test needs only the sign).
-The corner numbering, edge-plane construction and evaluation order are those written in
-reference.py's docstring, so both agree bit for bit.
+Takes which lights are candidates (visible, shadows = true, affecting a visible object:
+walk.affects_any) and last frame's shadowed lights with their tiers; returns this frame's
+shadow lights in rank order with their tiers. slot_shadow's rule (``pick_slot_shadows``)
+is inlined into objects.object_pass. The casters of the shadow lights are casters.py's.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba as nb
 import numpy as np
 
 from .frustum import CameraFrames
-from .jit import PRANGE_ONLY
-from .priority import berka_eccentricity, spot_cone
-from .scene import DIRECTIONAL, SPOT, LightStore
+from .priority import Packed, berka_eccentricity
+from .scene import DIRECTIONAL, Config, LightStore
 from .select import F_NEW_W, I_NEW_ROW
+from .walk import affects_any
+
+if TYPE_CHECKING:
+    from .grid import Grid
+
+
+@dataclass(frozen=True)
+class ShadowSet:
+    """The shadows stage's output: the shadow lights' ``rows`` in rank order, their ids
+    and ``tier``s; ``candidates``: how many lights competed; ``shadow_of_row``: per light
+    row its index in the shadow lights or -1; ``live``: per light row whether it may light
+    an object (visible, and with unshadowed = "skip" not a shadowed light left without a
+    map); ``directional``: the ids of the live directional lights applied outside the
+    slots, ranked by i + p_user (ties: lower id); ``settled``: the shadowed set equals last
+    frame's (then the next frame's ranking gives the same order; after a change it may
+    not, as a light that just joined ranks with the hysteresis bonus one frame later)."""
+
+    rows: np.ndarray
+    ids: np.ndarray
+    tier: np.ndarray
+    candidates: int
+    shadow_of_row: np.ndarray
+    live: np.ndarray
+    directional: np.ndarray
+    settled: bool
+
+    @property
+    def how(self) -> str:
+        return (f"{self.rows.size} of {self.candidates} candidates shadowed (ranking, tiers, "
+                "slot_shadow)" if self.candidates
+                else "skipped: no visible shadowed light affects a visible object")
+
+
+NO_SHADOWS = (np.zeros(0, np.int32), np.zeros(0, np.int64))
+
+
+def choose_shadows(last: ShadowSet | None, lights: LightStore, frames: CameraFrames,
+                   visible: np.ndarray, packed: Packed, grid: Grid, config: Config
+                   ) -> ShadowSet:
+    """The shadows stage: the candidates (visible lights with shadows = true that affect a
+    visible object of ``grid``) ranked against last frame's shadow lights (``last``, the
+    hysteresis' memory), and what follows from them: the live lights and the directional
+    lights outside the slots. ``visible``: the lights' visibility."""
+    candidate = visible & lights.shadows
+    rows, tier = np.zeros(0, np.int32), np.zeros(0, np.uint16)
+    if candidate.any():
+        cand_rows = np.flatnonzero(candidate).astype(np.int32)
+        candidate[cand_rows] = affects_any(packed.rows, cand_rows, grid.index, grid.records)
+        prev_ids, prev_tiers = NO_SHADOWS if last is None else (last.ids,
+                                                                last.tier.astype(np.int64))
+        rows, tier = rank_shadow_lights(lights, frames, candidate, prev_ids, prev_tiers,
+                                        config.shadow_budget, config.hysteresis,
+                                        config.hysteresis_abs, config.c1)
+    shadow_of_row = np.full(len(lights), -1, np.int8)
+    shadow_of_row[rows] = np.arange(rows.size)
+    live = visible.copy()
+    if config.unshadowed == "skip":
+        # A shadowed light without a shadow map affects nothing (it would leak through
+        # walls): its pairs stay cached but do not compete.
+        live &= ~(lights.shadows & (shadow_of_row < 0))
+    dir_all = packed.dir_all
+    dir_rows = dir_all[live[dir_all]] if not config.directional_in_slots else \
+        np.zeros(0, np.int64)
+    if dir_rows.size > 1:
+        dir_p = lights.intensity[dir_rows] + lights.priority[dir_rows]
+        dir_rows = dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]
+    ids = lights.id[rows]
+    # (At most shadow_budget <= 127 ids: Python's sort, not numpy's calls.)
+    settled = sorted([] if last is None else last.ids.tolist()) == sorted(ids.tolist())
+    return ShadowSet(rows, ids, tier, int(np.count_nonzero(candidate)), shadow_of_row, live,
+                     lights.id[dir_rows].astype(np.int32), settled)
 
 MIN_TIER, MAX_TIER = 256, 4096
-MAX_PLANES = 18  # a convex volume here has at most 6 faces plus 12 edge planes
-SWEEP_BLOCK = 512  # boxes per block of sweep_casters: its [6, 512] float64 columns fit L1
-SWEEP_PARTS = 64  # sweep_casters' parallel parts, each a run of blocks
-# Grid positions per group box of the sweep over a grid of every object (sweep_groups): a
-# group is a run of neighbouring cells' objects, and a box round them that a volume's
-# plane rejects rejects each of them.
-SWEEP_GROUP = 64
-
-# The 12 edges of a frustum: (face a, face b, corner c0, corner c1), faces 0 near, 1 far,
-# 2 left, 3 right, 4 bottom, 5 top; corner z*4 + x*2 + y (z 0 near / 1 far, x 0 left /
-# 1 right, y 0 bottom / 1 top); c0 < c1 are the two corners the faces share.
-EDGES = np.array([[0, 2, 0, 1], [0, 3, 2, 3], [0, 4, 0, 2], [0, 5, 1, 3],
-                  [1, 2, 4, 5], [1, 3, 6, 7], [1, 4, 4, 6], [1, 5, 5, 7],
-                  [2, 4, 0, 4], [2, 5, 1, 5], [3, 4, 2, 6], [3, 5, 3, 7]], np.int64)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -168,548 +214,3 @@ def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
         out[o, best] = shadow_of_row[si[I_NEW_ROW, best]]
 
 
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _corners(cam_p, basis, tan_xy, z_near, z_far, out):
-    """out[8, 3] = p + z f + (+-z t_x) r + (+-z t_y) u, corner z*4 + x*2 + y; returns the
-    centroid (their mean)."""
-    cen = np.zeros(3)
-    for zi in range(2):
-        z = z_near if zi == 0 else z_far
-        for xi in range(2):
-            sx = z * tan_xy[0] if xi else -z * tan_xy[0]
-            for yi in range(2):
-                sy = z * tan_xy[1] if yi else -z * tan_xy[1]
-                c = zi * 4 + xi * 2 + yi
-                for i in range(3):
-                    out[c, i] = cam_p[i] + z * basis[0, i] + sx * basis[1, i] + sy * basis[2, i]
-    for i in range(3):
-        acc = 0.0
-        for c in range(8):
-            acc += out[c, i]
-        cen[i] = acc / 8
-    return cen
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _edge_plane(a, b, anchor, cen, vn, vq, m):
-    """Appends plane m: normal a x b, point ``anchor``, flipped when the centroid is on its
-    negative side."""
-    n0 = a[1] * b[2] - a[2] * b[1]
-    n1 = a[2] * b[0] - a[0] * b[2]
-    n2 = a[0] * b[1] - a[1] * b[0]
-    if n0 * (cen[0] - anchor[0]) + n1 * (cen[1] - anchor[1]) + n2 * (cen[2] - anchor[2]) < 0:
-        n0, n1, n2 = -n0, -n1, -n2
-    vn[m, 0], vn[m, 1], vn[m, 2] = n0, n1, n2
-    for i in range(3):
-        vq[m, i] = anchor[i]
-    return m + 1
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _hull(p, corners, cen, face_n, face_q, vn, vq):
-    """Convex hull of point p and a frustum (faces face_n/face_q [6, 3]): the faces with p at
-    signed distance >= 0, then for every edge whose faces see p on opposite sides the plane
-    through p and that edge (normal (c0 - p) x (c1 - p)). Returns the plane count."""
-    side = np.empty(6, np.bool_)
-    m = 0
-    for f in range(6):
-        d = (face_n[f, 0] * (p[0] - face_q[f, 0]) + face_n[f, 1] * (p[1] - face_q[f, 1])
-             + face_n[f, 2] * (p[2] - face_q[f, 2]))
-        side[f] = d >= 0
-        if side[f]:
-            vn[m] = face_n[f]
-            vq[m] = face_q[f]
-            m += 1
-    a = np.empty(3)
-    b = np.empty(3)
-    for e in range(12):
-        if side[EDGES[e, 0]] != side[EDGES[e, 1]]:
-            for i in range(3):
-                a[i] = corners[EDGES[e, 2], i] - p[i]
-                b[i] = corners[EDGES[e, 3], i] - p[i]
-            m = _edge_plane(a, b, p, cen, vn, vq, m)
-    return m
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sweep(v, corners, cen, face_n, face_q, vn, vq):
-    """A frustum slice (faces face_n/face_q [6, 3]) swept along v: the faces with n . v >= 0,
-    plus for every edge between a kept and a dropped face the plane containing the edge
-    and v (normal (c1 - c0) x v, point c0). Returns (plane count, shared): the kept side
-    faces come first, ``shared`` of them; they are the camera's own planes, bit for bit
-    the same in every cascade, so a caster scan tests them once per camera. Then the edge
-    planes, then the kept near/far face (the order of an AND does not change it; this one
-    rejects early)."""
-    keep = np.empty(6, np.bool_)
-    for f in range(6):
-        keep[f] = face_n[f, 0] * v[0] + face_n[f, 1] * v[1] + face_n[f, 2] * v[2] >= 0
-    m = 0
-    for f in range(2, 6):
-        if keep[f]:
-            vn[m] = face_n[f]
-            vq[m] = face_q[f]
-            m += 1
-    shared = m
-    a = np.empty(3)
-    for e in range(12):
-        if keep[EDGES[e, 0]] != keep[EDGES[e, 1]]:
-            for i in range(3):
-                a[i] = corners[EDGES[e, 3], i] - corners[EDGES[e, 2], i]
-            m = _edge_plane(a, v, corners[EDGES[e, 2]], cen, vn, vq, m)
-    for f in range(2):
-        if keep[f]:
-            vn[m] = face_n[f]
-            vq[m] = face_q[f]
-            m += 1
-    return m, shared
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _volumes(rows, store, cams, splits, overlap):
-    """Kernel of ``culling_volumes``: per light of the store rows ``rows`` (store = the
-    light store's type, position, direction: read at those rows here, where three numpy
-    gathers cost ~3-8 us of a small frame) its volumes
-    [L, n_vol, MAX_PLANES, 3] (normals, points), plane counts [L, n_vol] (-1 for the
-    volumes a point or spot light does not have: it has one per camera) and, for a
-    directional light, the number of leading planes its cascades of camera k share
-    [L, n_cam]."""
-    typ, position, direction = store
-    cam_p, basis, tan_xy, plane_n, plane_p, near_far = cams
-    n_cam = cam_p.shape[0]
-    n_casc = splits.shape[1] - 1
-    n_l = rows.shape[0]
-    vn = np.zeros((n_l, n_cam * n_casc, MAX_PLANES, 3))
-    vq = np.zeros((n_l, n_cam * n_casc, MAX_PLANES, 3))
-    vm = np.full((n_l, n_cam * n_casc), -1, np.int64)
-    shared = np.zeros((n_l, n_cam), np.int64)
-    corners = np.empty((8, 3))
-    face_n = np.empty((6, 3))
-    face_q = np.empty((6, 3))
-    v = np.empty(3)
-    for t in range(n_l):
-        j = rows[t]
-        if typ[j] != DIRECTIONAL:
-            for k in range(n_cam):
-                cen = _corners(cam_p[k], basis[k], tan_xy[k], near_far[k, 0], near_far[k, 1],
-                               corners)
-                vm[t, k] = _hull(position[j], corners, cen, plane_n[k], plane_p[k], vn[t, k],
-                                 vq[t, k])
-            continue
-        for i in range(3):
-            v[i] = -direction[j, i]
-        for k in range(n_cam):
-            z = splits[k]
-            for c in range(n_casc):
-                z_near = near_far[k, 0] if c == 0 else z[c] - overlap * (z[c] - z[c - 1])
-                z_far = z[c + 1]
-                cen = _corners(cam_p[k], basis[k], tan_xy[k], z_near, z_far, corners)
-                face_n[:] = plane_n[k]
-                face_q[:] = plane_p[k]
-                for i in range(3):
-                    face_q[0, i] = cam_p[k, i] + z_near * basis[k, 0, i]
-                    face_q[1, i] = cam_p[k, i] + z_far * basis[k, 0, i]
-                b = k * n_casc + c
-                vm[t, b], shared[t, k] = _sweep(v, corners, cen, face_n, face_q, vn[t, b],
-                                                vq[t, b])
-    return vn, vq, vm, shared
-
-
-def culling_volumes(lights: LightStore, rows: np.ndarray, frames: CameraFrames,
-                    splits: np.ndarray, overlap: float
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The culling volumes of the shadowed lights ``rows`` (DESIGN "Casters"): for a point or
-    spot light one hull of its position and each camera's frustum (volume k = camera k);
-    for a directional light each camera's cascade slices [a_c, z_c+1] swept towards the
-    light (volume k*C + c, its caster_masks bit). Returns (normals, points, counts, shared
-    leading planes per camera; see ``_volumes``)."""
-    cams = (frames.position, frames.basis, frames.tan_xy, frames.plane_n, frames.plane_p,
-            frames.near_far)
-    return _volumes(rows, (lights.type, lights.position, lights.direction), cams, splits,
-                    overlap)
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _plane_ok(vn, vq, t, b, i, lo, hi, v):
-    """The corner of box v ([lo, hi] rows of [n, 3] arrays) farthest along the normal of
-    plane i of volume b of light t has signed distance >= 0."""
-    n0 = vn[t, b, i, 0]
-    n1 = vn[t, b, i, 1]
-    n2 = vn[t, b, i, 2]
-    c0 = hi[v, 0] if n0 >= 0.0 else lo[v, 0]
-    c1 = hi[v, 1] if n1 >= 0.0 else lo[v, 1]
-    c2 = hi[v, 2] if n2 >= 0.0 else lo[v, 2]
-    return n0 * (c0 - vq[t, b, i, 0]) + n1 * (c1 - vq[t, b, i, 1]) + n2 * (c2 - vq[t, b, i, 2]) >= 0.0
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def box_in_volume(vn, vq, vm, t, b, lo, hi, v):
-    """The conservative AABB test of box v against volume b of light t (DESIGN "Tests");
-    vn, vq, vm = the culling volumes' normals, points and plane counts."""
-    for i in range(vm[t, b]):
-        if not _plane_ok(vn, vq, t, b, i, lo, hi, v):
-            return False
-    return True
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def cube_faces(p0, p1, p2, r, lo_v, hi_v, v):
-    """Bit f for every cube-face pyramid (+x, -x, +y, -y, +z, -z) box v is in: for +x with
-    x' = x - p: x' >= 0, x' -+ y' >= 0, x' -+ z' >= 0, r - x' >= 0, each at the box corner
-    farthest along the plane's normal."""
-    lo = (lo_v[v, 0] - p0, lo_v[v, 1] - p1, lo_v[v, 2] - p2)
-    hi = (hi_v[v, 0] - p0, hi_v[v, 1] - p1, hi_v[v, 2] - p2)
-    bits = 0
-    for a in range(3):
-        for neg in range(2):
-            top = -lo[a] if neg else hi[a]
-            bottom = -hi[a] if neg else lo[a]
-            ok = top >= 0 and r - bottom >= 0
-            for b in range(3):
-                if b != a:
-                    ok = ok and top - lo[b] >= 0 and top + hi[b] >= 0
-            if ok:
-                bits |= 1 << (2 * a + neg)
-    return bits
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def caster_bits(hot, lf, j, typ, t, vn, vq, vm, lo, hi, v, w_lo, w_hi, o):
-    """caster_masks entry of an object for point or spot light row j, whose culling volumes
-    are (vn, vq, vm)[t] (one per camera), once the caller has checked casts_shadows, the
-    mask and d2 <= r*r: the spot cone, then some camera's hull, then the cube faces (point)
-    or bit 0 (spot). 0: not a caster. (lo, hi, v): the box as row v of the grid records,
-    in the light's frame (the packed light's); (w_lo, w_hi, o): the box as row o of the
-    store, in world space like the volumes. (Arrays one by one: pairs.grid_casters calls
-    it once an object.)"""
-    if typ == SPOT:
-        # float64 whatever the records' precision (float32 + float32 rounds in float32).
-        lx, ly, lz = np.float64(lo[v, 0]), np.float64(lo[v, 1]), np.float64(lo[v, 2])
-        hx, hy, hz = np.float64(hi[v, 0]), np.float64(hi[v, 1]), np.float64(hi[v, 2])
-        ex = hx - lx
-        ey = hy - ly
-        ez = hz - lz
-        e2 = ex * ex + ey * ey + ez * ez
-        geo = ((lx + hx) / 2, (ly + hy) / 2, (lz + hz) / 2, math.sqrt(e2) / 2, e2)
-        meets, _ = spot_cone(hot, lf, j, geo, False)
-        if not meets:
-            return 0
-    for k in range(vm.shape[1]):
-        if vm[t, k] >= 0 and box_in_volume(vn, vq, vm, t, k, w_lo, w_hi, o):
-            if typ == SPOT:
-                return 1
-            return cube_faces(hot[j, 0], hot[j, 1], hot[j, 2], hot[j, 3], lo, hi, v)
-    return 0
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _block_in_planes(vn, vq, t, b, first, end, lead, box, inside):
-    """inside[r] &= box r of the block is on the inner side of planes first..end-1 of
-    volume b of light t, by the AABB test of ``_plane_ok`` with the same arithmetic. Plane
-    by plane over the whole block: the corner a plane picks is the same for every box, so
-    the loop has no branch and vectorises over the block's coordinates (box [6, m]: lo x,
-    y, z, hi x, y, z). Plane ``lead`` goes first, and the scan stops once no box is left.
-    Returns (any box left, the plane that emptied the block, else lead)."""
-    has_lead = first <= lead < end
-    for step in range(end - first):
-        i = first + step
-        if has_lead:
-            i = lead if step == 0 else (i - 1 if i - 1 < lead else i)
-        n0 = vn[t, b, i, 0]
-        n1 = vn[t, b, i, 1]
-        n2 = vn[t, b, i, 2]
-        q0 = vq[t, b, i, 0]
-        q1 = vq[t, b, i, 1]
-        q2 = vq[t, b, i, 2]
-        c0 = box[3] if n0 >= 0.0 else box[0]
-        c1 = box[4] if n1 >= 0.0 else box[1]
-        c2 = box[5] if n2 >= 0.0 else box[2]
-        left = 0
-        for r in range(inside.shape[0]):
-            k = inside[r] & (n0 * (c0[r] - q0) + n1 * (c1[r] - q1) + n2 * (c2[r] - q2) >= 0.0)
-            inside[r] = k
-            left += k
-        if left == 0:
-            return False, i
-    return True, lead
-
-
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def sweep_casters(lo, hi, casts, omask, lmask, vols):
-    """caster_masks of every object for each directional light t (parallel over blocks of
-    SWEEP_BLOCK objects): bit b set iff the object casts, its mask matches lmask[t] and its
-    box [lo, hi] is in volume b (camera*C + cascade sweep); vols = (normals, points,
-    counts, shared) from ``culling_volumes``, the shared leading planes tested once per
-    camera. Returns bits [T, N] uint32.
-
-    A shadow distance is small beside a large scene, so most boxes are rejected, each by
-    whichever plane it lies outside of. Tested box by box with an early exit (the version
-    before this one), 1M boxes took 14.5 ms on 2 threads; plane by plane over blocks of
-    boxes copied into columns (``_block_in_planes``), each block left once it is empty,
-    they take 3.9 ms, most of it the copy (bench/RESULTS.md, issue 6)."""
-    vm, shared = vols[2], vols[3]
-    n = lo.shape[0]
-    bits = np.empty((lmask.shape[0], n), np.uint32)
-    n_blocks = (n + SWEEP_BLOCK - 1) // SWEEP_BLOCK
-    n_parts = min(n_blocks, SWEEP_PARTS)
-    for part in nb.prange(n_parts):
-        box = np.empty((6, SWEEP_BLOCK))
-        base = np.empty(SWEEP_BLOCK, np.bool_)
-        in_cam = np.empty(SWEEP_BLOCK, np.bool_)
-        inside = np.empty(SWEEP_BLOCK, np.bool_)
-        acc = np.empty(SWEEP_BLOCK, np.uint32)
-        # The plane that emptied the part's last block goes first in the next one.
-        lead = np.full(vm.shape, -1, np.int64)
-        lead_shared = np.full(shared.shape, -1, np.int64)
-        for blk in range(n_blocks * part // n_parts, n_blocks * (part + 1) // n_parts):
-            o0 = blk * SWEEP_BLOCK
-            m = min(n, o0 + SWEEP_BLOCK) - o0
-            _sweep_block(lo, hi, casts, omask, lmask, vols, o0,
-                         (box[:, :m], base[:m], in_cam[:m], inside[:m], acc[:m]),
-                         (lead, lead_shared), bits)
-    return bits
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
-    """sweep_casters on the boxes o0.. of one block (scratch sized to the block)."""
-    box, base, in_cam, inside, acc = scratch
-    m = acc.shape[0]
-    for r in range(m):
-        for a in range(3):
-            box[a, r] = lo[o0 + r, a]
-            box[3 + a, r] = hi[o0 + r, a]
-    for t in range(lmask.shape[0]):
-        for r in range(m):
-            base[r] = casts[o0 + r] and (np.int64(omask[o0 + r]) & lmask[t]) != 0
-        _block_masks(vols, t, box, (base, in_cam, inside, acc), leads)
-        bits[t, o0:o0 + m] = acc
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _block_masks(vols, t, box, masks, leads):
-    """acc[r] = the caster mask of light t of box r of a block (box [6, m] in columns, as
-    _block_in_planes reads them), 0 where base[r] is False: per camera its shared planes,
-    then each cascade's own. masks = (base, in_cam, inside, acc), bool, bool, bool, uint32
-    [m] (the middle two scratch); leads as _sweep_block's."""
-    vn, vq, vm, shared = vols
-    base, in_cam, inside, acc = masks
-    lead, lead_shared = leads
-    n_cam = shared.shape[1]
-    n_casc = vm.shape[1] // n_cam
-    acc[:] = 0
-    for k in range(n_cam):
-        b0 = k * n_casc
-        in_cam[:] = base
-        left, lead_shared[t, k] = _block_in_planes(vn, vq, t, b0, 0, shared[t, k],
-                                                   lead_shared[t, k], box, in_cam)
-        if not left:
-            continue
-        for c in range(n_casc):
-            b = b0 + c
-            inside[:] = in_cam
-            left, lead[t, b] = _block_in_planes(vn, vq, t, b, shared[t, k], vm[t, b],
-                                                lead[t, b], box, inside)
-            if left:
-                for r in range(acc.shape[0]):
-                    acc[r] |= np.uint32(inside[r]) << b
-
-
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def group_boxes(at):
-    """Per group of SWEEP_GROUP consecutive grid positions (parallel): the box round every
-    box of the group, [G, 6] (min lo, max hi), from the boxes themselves (float64), so it
-    holds each of them exactly. at = (lo, hi, rows, by_row): position v's box is row
-    rows[v] of lo and hi if by_row, else row v (a grid's float64 records, which hold the
-    world boxes in exact precision, read in order)."""
-    lo, hi, rows, by_row = at
-    n = rows.shape[0]
-    n_g = (n + SWEEP_GROUP - 1) // SWEEP_GROUP
-    out = np.empty((n_g, 6))
-    for g in nb.prange(n_g):
-        for a in range(3):
-            out[g, a] = np.inf
-            out[g, 3 + a] = -np.inf
-        for v in range(g * SWEEP_GROUP, min(n, (g + 1) * SWEEP_GROUP)):
-            p = rows[v] if by_row else v
-            for a in range(3):
-                if lo[p, a] < out[g, a]:
-                    out[g, a] = lo[p, a]
-                if hi[p, a] > out[g, 3 + a]:
-                    out[g, 3 + a] = hi[p, a]
-    return out
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def widen_group_boxes(boxes, lo, hi, rows, pos_of):
-    """The group boxes of the objects ``rows``, which moved within a kept grid, widened
-    to hold their new boxes too (the old ones stay inside: a group box only has to hold
-    its objects, and it is made tight again with the grid)."""
-    for i in range(rows.shape[0]):
-        o = rows[i]
-        g = pos_of[o] // SWEEP_GROUP
-        for a in range(3):
-            if lo[o, a] < boxes[g, a]:
-                boxes[g, a] = lo[o, a]
-            if hi[o, a] > boxes[g, 3 + a]:
-                boxes[g, 3 + a] = hi[o, a]
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v):
-    """Whether box v of [lo, hi] is in any volume of camera k: the camera's shared planes
-    (kept in its first volume), then each cascade's own, by ``_plane_ok``."""
-    b0 = k * n_casc
-    for i in range(shared[t, k]):
-        if not _plane_ok(vn, vq, t, b0, i, lo, hi, v):
-            return False
-    for c in range(n_casc):
-        b = b0 + c
-        ok = True
-        for i in range(shared[t, k], vm[t, b]):
-            if not _plane_ok(vn, vq, t, b, i, lo, hi, v):
-                ok = False
-                break
-        if ok:
-            return True
-    return False
-
-
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def sweep_groups(casts, omask, lmask, vols, at, gbox):
-    """sweep_casters' caster masks over a grid of every object, a group box at a time: a
-    group of SWEEP_GROUP grid positions whose box ``gbox`` (group_boxes) is in none of a
-    light's volumes holds no caster of it and is skipped; the boxes of the others take the
-    test plane by plane, copied into columns (_block_masks, as sweep_casters' blocks). at =
-    (lo, hi, rows, by_row) as in group_boxes (rows: the object row of each position).
-    Returns (offsets [T + 1], object rows, caster masks): light t's casters at
-    offsets[t]..offsets[t+1]-1, rows ascending, the nonzero entries of sweep_casters'.
-
-    Exact, not approximate: each plane test is the same float64 expression at the box
-    corner farthest along the normal, and every operation in it (a difference, a product
-    by the normal's component, a sum) is rounded monotonically, so a corner of the group
-    box that lies further along the normal than each of its objects' corners gives a
-    signed distance at least theirs: a plane the group box fails, each of them fails
-    (bench/RESULTS.md, issue 6). Groups go to the parallel parts in turn (part p takes
-    groups p, p + parts, ...): the few a shadow distance keeps lie together in the grid."""
-    vn, vq, vm, shared = vols
-    lo, hi, rows, by_row = at
-    n_t = lmask.shape[0]
-    n_cam = shared.shape[1]
-    n_casc = vm.shape[1] // n_cam
-    n_g = gbox.shape[0]
-    nv = rows.shape[0]
-    n_parts = max(1, min(n_g, SWEEP_PARTS))
-    # Each position's mask, written for the groups let through only; counted per part,
-    # then gathered at the places the counts give (the output does not depend on the
-    # threads).
-    bits = np.empty((n_t, nv), np.uint32)
-    through = np.zeros((n_t, n_g), np.bool_)
-    count = np.zeros((n_t, n_parts + 1), np.int64)
-    g_lo, g_hi = gbox[:, :3], gbox[:, 3:]
-    for part in nb.prange(n_parts):
-        # The boxes of a group let through, in columns, tested plane by plane as
-        # sweep_casters' blocks are (box by box, an early exit a plane, the ~3-4k objects
-        # of a (10k, 1k) or (100k, 10k) frame's ~50 such groups took ~0.15 ms).
-        box = np.empty((6, SWEEP_GROUP))
-        base, in_cam, inside = (np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.bool_),
-                                np.empty(SWEEP_GROUP, np.bool_))
-        acc = np.empty(SWEEP_GROUP, np.uint32)
-        leads = (np.full(vm.shape, -1, np.int64), np.full(shared.shape, -1, np.int64))
-        for g in range(part, n_g, n_parts):
-            v0 = g * SWEEP_GROUP
-            m = min(nv, v0 + SWEEP_GROUP) - v0
-            copied = False
-            for t in range(n_t):
-                hit = False
-                for k in range(n_cam):
-                    hit = hit or _in_sweep(vn, vq, vm, shared, t, k, n_casc, g_lo, g_hi, g)
-                if not hit:
-                    continue
-                through[t, g] = True
-                if not copied:
-                    for r in range(m):
-                        p = rows[v0 + r] if by_row else v0 + r
-                        for a in range(3):
-                            box[a, r] = lo[p, a]
-                            box[3 + a, r] = hi[p, a]
-                    copied = True
-                for r in range(m):
-                    o = rows[v0 + r]
-                    base[r] = casts[o] and (np.int64(omask[o]) & lmask[t]) != 0
-                _block_masks(vols, t, box[:, :m], (base[:m], in_cam[:m], inside[:m], acc[:m]),
-                             leads)
-                c = 0
-                for r in range(m):
-                    bits[t, v0 + r] = acc[r]
-                    c += acc[r] != 0
-                count[t, part + 1] += c
-    offsets = np.zeros(n_t + 1, np.int64)
-    for t in range(n_t):
-        for part in range(n_parts):
-            count[t, part + 1] += count[t, part]
-        offsets[t + 1] = offsets[t] + count[t, n_parts]
-    out_rows = np.empty(offsets[n_t], np.int64)
-    masks = np.empty(offsets[n_t], np.uint32)
-    for part in nb.prange(n_parts):
-        for t in range(n_t):
-            d = offsets[t] + count[t, part]
-            for g in range(part, n_g, n_parts):
-                if not through[t, g]:
-                    continue
-                for v in range(g * SWEEP_GROUP, min(nv, (g + 1) * SWEEP_GROUP)):
-                    if bits[t, v] != 0:
-                        out_rows[d] = rows[v]
-                        masks[d] = bits[t, v]
-                        d += 1
-    # Grid order to row order, light by light: a sort of the casters when they are few
-    # beside the objects, else their masks spread over a row-indexed array and read back.
-    n = casts.shape[0]
-    for t in range(n_t):
-        a, b = offsets[t], offsets[t + 1]
-        if (b - a) * 16 <= n:
-            order = np.argsort(out_rows[a:b])
-            r = out_rows[a:b][order]
-            m = masks[a:b][order]
-            out_rows[a:b] = r
-            masks[a:b] = m
-        else:
-            spread = np.zeros(n, np.uint32)
-            for i in range(a, b):
-                spread[out_rows[i]] = masks[i]
-            d = a
-            for o in range(n):
-                if spread[o] != 0:
-                    out_rows[d] = o
-                    masks[d] = spread[o]
-                    d += 1
-    return offsets, out_rows, masks
-
-
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def hidden_near(lo, hi, casts, visible, box):
-    """Rows (ascending) of the invisible casting objects whose box meets ``box`` (lo, hi
-    [6]): the candidates a point or spot light's casters need beside the visible objects.
-    Per-chunk counts, then each chunk writes its own range (parallel, in row order)."""
-    n = lo.shape[0]
-    n_chunks = (n + 4095) // 4096
-    counts = np.zeros(n_chunks + 1, np.int64)
-    keep = np.zeros(n, np.bool_)
-    for ch in nb.prange(n_chunks):
-        c = 0
-        for o in range(ch * 4096, min(n, (ch + 1) * 4096)):
-            k = casts[o] and not visible[o]
-            for a in range(3):
-                k = k and hi[o, a] >= box[a] and lo[o, a] <= box[3 + a]
-            keep[o] = k
-            c += k
-        counts[ch + 1] = c
-    for ch in range(n_chunks):
-        counts[ch + 1] += counts[ch]
-    rows = np.empty(counts[n_chunks], np.int64)
-    for ch in nb.prange(n_chunks):
-        d = counts[ch]
-        for o in range(ch * 4096, min(n, (ch + 1) * 4096)):
-            if keep[o]:
-                rows[d] = o
-                d += 1
-    return rows

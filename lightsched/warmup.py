@@ -32,12 +32,12 @@ from types import ModuleType
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
-from . import scheduler
 from .frame import PER_OBJECT, changed_rows
-from .pairs import STATIC_K
+from .objects import STATIC_K
 from .scene import Camera, Config
 from .scenes import city, move_lights
 from .scheduler import Scheduler
+from .tuning import Tuning
 
 # A K compiled without a static trip count (pairs.object_pass): any K not in STATIC_K.
 GENERIC_K = next(k for k in range(2, 64) if k not in STATIC_K)
@@ -87,15 +87,9 @@ def warm_up(max_lights: Iterable[int] | None = None,
     those settings load or compile nothing. Leaves no state behind but numba's."""
     t = time.perf_counter()
     before = cache_counts()
-    # The small city takes the candidate lists' path too (large scenes only, otherwise).
-    min_objects = scheduler.CANDIDATE_MIN_OBJECTS
-    scheduler.CANDIDATE_MIN_OBJECTS = 0
-    try:
-        for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
-            for precision in precisions:
-                _paths(Config(max_lights=int(k), precision=precision))
-    finally:
-        scheduler.CANDIDATE_MIN_OBJECTS = min_objects
+    for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
+        for precision in precisions:
+            _paths(Config(max_lights=int(k), precision=precision))
     after = cache_counts()
     return WarmUp(time.perf_counter() - t, after[0] - before[0], after[1] - before[1])
 
@@ -107,11 +101,12 @@ def _paths(config: Config) -> None:
     lights, objects = sc.lights, sc.objects
     wide = sc.cameras
     # A camera low in a corner sees few of the objects: the grid of the visible ones and
-    # the invisible casters near shadowed lights (scheduler.EVERY_OBJECT_SHARE).
+    # the invisible casters near shadowed lights (Tuning.every_object_share).
     corner = np.array([-0.45 * sc.side, 3.0, -0.45 * sc.side])
     narrow = [Camera(position=corner, forward=np.array([1.0, -0.1, 0.2]),
                      up=np.array([0.0, 1.0, 0.0]), fov_y=0.6, aspect=1.0, near=0.5, far=200.0)]
-    s = Scheduler(config)
+    # The small city takes the candidate lists' path too (large scenes only, otherwise).
+    s = Scheduler(config, Tuning(candidate_min_objects=0))
     s.set_lights(**lights)
     s.set_objects(**objects)
     ids = lights["id"]

@@ -1,13 +1,13 @@
 """Suite-wide hypothesis profile (see tests/helpers.py): deadline off, blobs printed,
-example counts scaled by the LIGHTSCHED_EXAMPLES environment variable. The ``grid_kind``
-fixture: the oracle modules run once per kind of object grid. And a guard against stale
-numba caches (below)."""
+example counts scaled by the LIGHTSCHED_EXAMPLES environment variable. The ``tuning``
+fixture (and ``grid_kind``, its name): the oracle modules' tests run once per kind of
+object grid, each passing that Tuning to the fast schedulers it makes. And a guard
+against stale numba caches (below)."""
 
 from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -36,41 +36,46 @@ _drop_stale_numba_cache()
 # After the guard, so that no kernel has been loaded from the cache yet.
 from helpers import register_profile  # noqa: E402
 
-from lightsched import scheduler  # noqa: E402
+from lightsched.tuning import Tuning  # noqa: E402
 
 register_profile()
 
-# EVERY_OBJECT_SHARE that forces each kind of grid of the fast path (scheduler.py): every
-# object in it (an invisible object's record masked: simd.SHOWN), or only the visible objects
-# (and a second grid of the invisible casters near shadowed point and spot lights).
-GRID_KINDS = {"every": 0.0, "visible": math.inf}
+# The Tuning that forces each kind of grid of the fast path (grid.py): every object in it
+# (an invisible object's record masked: simd.SHOWN), or only the visible objects (and a
+# second grid of the invisible casters near shadowed point and spot lights); and with each,
+# one of the two ways of each choice below.
+TUNINGS = {
+    "every": Tuning(every_object_share=0.0, candidate_min_objects=0,
+                    direct_tests_per_light=1e18, grid_tests_per_object=1e18,
+                    near_scan_pairs=0, few_pairs=math.inf),
+    "visible": Tuning(every_object_share=math.inf, candidate_min_objects=0,
+                      direct_tests_per_light=-1e18, grid_tests_per_object=-1e18,
+                      near_scan_pairs=0, few_pairs=-1),
+}
 
 
-@pytest.fixture(params=sorted(GRID_KINDS), scope="module")
-def grid_kind(request: pytest.FixtureRequest) -> Iterator[str]:
-    """Runs a module's tests with each kind of grid: most test scenes stand in front of the
-    camera, so the scheduler's own choice (every object once half are visible) would leave
-    the grid of visible objects untested. Full frames of these modules' small scenes take
-    the candidate lists' path where it applies (large scenes only, otherwise). Objects
-    that move or come into view in an incremental frame get their pairs from a test
-    against every light with the first kind, from a grid of the lights with the second;
-    and the pairs of the lights an incremental frame walks again are
-    grouped by sorting with the first, by a histogram of every object with the second
-    (the scheduler chooses both by counts, DIRECT_TESTS_PER_LIGHT, GRID_TESTS_PER_OBJECT
-    and FEW_PAIRS, which small scenes would not cross). With both, an incremental frame
-    whose flagged lights did not change finds the objects holding their pairs by walking
-    them (NEAR_SCAN_PAIRS: the scheduler walks them only where the cache holds thousands
-    of pairs per flagged light); where they changed, it scans every object's pairs."""
-    names = ("EVERY_OBJECT_SHARE", "CANDIDATE_MIN_OBJECTS", "DIRECT_TESTS_PER_LIGHT",
-             "GRID_TESTS_PER_OBJECT", "FEW_PAIRS", "NEAR_SCAN_PAIRS")
-    old = {name: getattr(scheduler, name) for name in names}
-    every = request.param == "every"
-    scheduler.EVERY_OBJECT_SHARE = GRID_KINDS[request.param]
-    scheduler.CANDIDATE_MIN_OBJECTS = 0
-    scheduler.DIRECT_TESTS_PER_LIGHT = 1e18 if every else -1e18
-    scheduler.GRID_TESTS_PER_OBJECT = 1e18 if every else -1e18
-    scheduler.NEAR_SCAN_PAIRS = 0
-    scheduler.FEW_PAIRS = math.inf if every else -1
-    yield request.param
-    for name, value in old.items():
-        setattr(scheduler, name, value)
+@pytest.fixture(params=sorted(TUNINGS), scope="module")
+def grid_kind(request: pytest.FixtureRequest) -> str:
+    """The name of the kind of grid ``tuning`` forces ("every" or "visible"), for tests
+    whose expectations depend on it."""
+    return request.param
+
+
+@pytest.fixture(scope="module")
+def tuning(grid_kind: str) -> Tuning:
+    """The Tuning a test passes to every fast scheduler it makes, once per kind of grid
+    (a module's tests run with each): most test scenes stand in front of the camera, so
+    the scheduler's own choice (every object once half are visible) would leave the grid
+    of visible objects untested. Full frames of these modules' small scenes take the
+    candidate lists' path where it applies (large scenes only, otherwise:
+    candidate_min_objects). Objects that move or come into view in an incremental frame
+    get their pairs from a test against every light with the first kind, from a grid of
+    the lights with the second; and the pairs of the lights an incremental frame walks
+    again are grouped by sorting with the first, by a histogram of every object with the
+    second (the scheduler chooses both by counts, direct_tests_per_light,
+    grid_tests_per_object and few_pairs, which small scenes would not cross). With both,
+    an incremental frame whose flagged lights did not change finds the objects holding
+    their pairs by walking them (near_scan_pairs: the scheduler walks them only where the
+    cache holds thousands of pairs per flagged light); where they changed, it scans every
+    object's pairs."""
+    return TUNINGS[grid_kind]

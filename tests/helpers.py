@@ -22,6 +22,7 @@ import lightsched as ls
 import lightsched.reference as ref
 from lightsched.frame import FRAME_ARRAYS
 from lightsched.scene import DIRECTIONAL, FADING_OUT
+from lightsched.tuning import Tuning
 
 # --------------------------------------------------------------------------- hypothesis
 
@@ -270,18 +271,22 @@ class Twin:
     Every set_/update_/remove_ call goes to both (with private copies of the arrays) and
     must succeed or fail alike. ``frame`` steps both and compares them; after a frame that
     differed only by near-ties their states may legitimately part, so later frames are
-    then only checked for sanity (``diverged`` says so)."""
+    then only checked for sanity (``diverged`` says so). ``compared`` counts the frames
+    that were compared (the one that found the near-ties included), ``frames`` all of
+    them: a test of a sequence asserts that most were. ``tuning``: the fast scheduler's
+    (lightsched.tuning.Tuning; None, the default one)."""
 
     def __init__(self, config: ls.Config | None = None, tie_rel: float = 1e-9,
-                 bitwise: bool | None = None) -> None:
+                 bitwise: bool | None = None, tuning: Tuning | None = None) -> None:
         self.config = config or ls.Config()
-        self.fast = ls.Scheduler(self.config)
+        self.fast = ls.Scheduler(self.config, tuning)
         self.ref = ref.Scheduler(self.config)
         self.tie_rel = tie_rel
         self.bitwise = bitwise
         self.diverged = False
         self.tied_rows = 0
         self.frames = 0
+        self.compared = 0
         self.plans: list[str] = []
 
     def _call(self, method: str, **kw: Any) -> None:
@@ -332,6 +337,7 @@ class Twin:
         if not self.diverged:
             t = assert_frames_match(ff, fo, tie_rel=self.tie_rel, bitwise=self.bitwise,
                                     oracle_p=OracleP(self.ref, cameras), what=what)
+            self.compared += 1
             if t:
                 self.tied_rows += t
                 self.diverged = True
@@ -385,7 +391,7 @@ def frames_identical(a: ls.Frame, b: ls.Frame, what: str = "") -> None:
 
 def by_row_or_grid(lo: np.ndarray, hi: np.ndarray, grid_rows: np.ndarray, by_row: bool
                    ) -> tuple:
-    """The boxes of a grid's positions as shadows.group_boxes, sweep_groups and
+    """The boxes of a grid's positions as grid.group_boxes, casters.sweep_groups and
     frustum.objects_visible_groups read them: the objects' by row, or (as a grid's float64
     records hold them) copied into grid order, as views of one [V, 8] array."""
     if by_row:

@@ -14,6 +14,7 @@ test_equivalence.py compares fast and oracle lists at random.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,21 +24,21 @@ from hypothesis import strategies as st
 
 import lightsched as ls
 import lightsched.reference as ref
-from lightsched.shadows import (
-    MAX_PLANES,
-    SWEEP_BLOCK,
-    group_boxes,
-    sweep_casters,
-    sweep_groups,
-    widen_group_boxes,
-)
+from lightsched.casters import MAX_PLANES, SWEEP_BLOCK, sweep_casters, sweep_groups
+from lightsched.grid import group_boxes, widen_group_boxes
+from lightsched.tuning import Tuning
 
-# Each test runs with both kinds of object grid of the fast path (conftest.py).
-pytestmark = pytest.mark.usefixtures("grid_kind")
+# The tests that make fast schedulers run with both kinds of object grid of the fast path:
+# they take the ``tuning`` fixture (conftest.py) and give it to each.
 
 SCHEDULERS = pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
 MARGIN = 1e-6
 FAR_AWAY = 1e4  # metres along -direction: the segment towards a directional light
+
+
+def new_scheduler(cls: type, cfg: ls.Config, tuning: Tuning) -> Any:
+    """A fast scheduler with ``tuning``, or an oracle (which has none)."""
+    return cls(cfg, tuning) if cls is ls.Scheduler else cls(cfg)
 
 
 def casters_of(f: ls.Frame, light_id: int) -> dict[int, int]:
@@ -63,8 +64,8 @@ FAR_SIDE = ((-12.2, -0.2, 0.0), (-11.8, 0.2, 20.0))  # behind the light, seen fr
 
 
 @SCHEDULERS
-def test_pole_behind_the_camera_casts_into_view_and_far_side_does_not(cls):
-    s = cls(ls.Config(shadow_budget=4))
+def test_pole_behind_the_camera_casts_into_view_and_far_side_does_not(cls, tuning):
+    s = new_scheduler(cls, ls.Config(shadow_budget=4), tuning)
     s.set_objects(**boxes([GROUND, POLE, FAR_SIDE]))
     s.set_lights(id=[9], position=[[-6.0, 0.0, 12.0]], radius=[60.0], intensity=[10.0],
                  shadows=[True])
@@ -81,9 +82,9 @@ def test_pole_behind_the_camera_casts_into_view_and_far_side_does_not(cls):
 
 
 @SCHEDULERS
-def test_cube_face_bits_and_spot_bit(cls):
+def test_cube_face_bits_and_spot_bit(cls, tuning):
     cam = camera(position=(0.0, 0.0, -30.0), forward=(0.0, 0.0, 1.0), fov_y=2.0, far=200.0)
-    s = cls(ls.Config(shadow_budget=4))
+    s = new_scheduler(cls, ls.Config(shadow_budget=4), tuning)
     # Boxes at each face of a point light at the origin, one straddling the +x/+y diagonal.
     rows = [((2.0, -0.5, -0.5), (3.0, 0.5, 0.5)), ((-3.0, -0.5, -0.5), (-2.0, 0.5, 0.5)),
             ((-0.5, 2.0, -0.5), (0.5, 3.0, 0.5)), ((-0.5, -3.0, -0.5), (0.5, -2.0, 0.5)),
@@ -101,14 +102,14 @@ def test_cube_face_bits_and_spot_bit(cls):
 
 
 @SCHEDULERS
-def test_directional_bits_per_camera_and_cascade(cls):
+def test_directional_bits_per_camera_and_cascade(cls, tuning):
     # Sun straight down; two cameras looking along +x and -x at 5 m height.
     cams = [camera(position=(0.0, 0.0, 5.0), forward=(1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
                    fov_y=1.0, near=1.0, far=200.0, id=0),
             camera(position=(0.0, 0.0, 5.0), forward=(-1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
                    fov_y=1.0, near=1.0, far=200.0, id=1)]
     cfg = ls.Config(cascades=4, shadow_distance=100.0, cascade_overlap=0.0)
-    s = cls(cfg)
+    s = new_scheduler(cls, cfg, tuning)
     z = ref.cascade_splits(ref.CameraFrame(cams[0]), cfg)
     mid = [(z[c] + z[c + 1]) / 2 for c in range(4)]
     # One high roof above the middle of each of camera 0's cascades (out of view, above
@@ -287,14 +288,14 @@ def assert_never_missed(f: ls.Frame, lights: dict, objects: dict, cams: list[ls.
 SCENES = 240
 
 
-def test_never_missed_on_random_scenes():
+def test_never_missed_on_random_scenes(tuning):
     """Every sampled shadowing caster is listed with the right bit, on SCENES scenes, for
     the fast path; the oracle gives the same frame (so the property holds for it too)."""
     rng = np.random.default_rng(2026)
     checked, with_casters, types = 0, 0, set()
     for i in range(SCENES):
         lights, objects, cams, cfg = random_scene(rng)
-        fast, oracle = ls.Scheduler(cfg), ref.Scheduler(cfg)
+        fast, oracle = ls.Scheduler(cfg, tuning), ref.Scheduler(cfg)
         for s in (fast, oracle):
             s.set_lights(**lights)
             s.set_objects(**objects)
@@ -312,12 +313,12 @@ def test_never_missed_on_random_scenes():
 
 @examples(0.04)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
+def test_sun_casters_of_a_large_scene_match_the_oracle(seed, tuning):
     """The sun's sweep at scale: ~70k boxes over a town, two cameras looking at it, a
     slanted sun with a shadow distance that keeps a fraction of them (955 to 20k casters
     over 63 seeds), some objects not casting or masked out; equal to the oracle's frame.
     The cameras see over half of the objects, so the frame keeps a grid of every object
-    and sweeps its group boxes first (shadows.sweep_groups; ~1100 groups). The flat sweep
+    and sweeps its group boxes first (casters.sweep_groups; ~1100 groups). The flat sweep
     (sweep_casters, each of its parallel parts scanning 2-3 blocks here) and the plane
     order a part carries from block to block are checked below, on plane sets built to
     empty whole blocks."""
@@ -343,7 +344,7 @@ def test_sun_casters_of_a_large_scene_match_the_oracle(seed):
     cfg = ls.Config(shadow_distance=float(rng.uniform(100.0, 500.0)), max_lights=2)
     frames = []
     for cls in (ls.Scheduler, ref.Scheduler):
-        s = cls(cfg)
+        s = new_scheduler(cls, cfg, tuning)
         s.set_objects(**objects)
         s.set_lights(**lights)
         frames.append(s.frame(cams))
@@ -402,7 +403,7 @@ def random_volumes(rng: np.random.Generator, reach: tuple[float, float] = (0.3, 
 @examples(0.2)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
-    """shadows.sweep_casters on random convex plane sets (2 lights x 2 cameras x 2
+    """casters.sweep_casters on random convex plane sets (2 lights x 2 cameras x 2
     cascades, 1-3 shared planes, 3-8 own) and ~40k boxes, against the test written out
     in numpy. The boxes come in runs: whole blocks far outside one plane (the block is
     emptied and that plane is tried first in the part's next blocks), then blocks near the
@@ -431,7 +432,7 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
 @given(seed=st.integers(0, 2**32 - 1), order=st.sampled_from(["cells", "random"]),
        reach=st.sampled_from([(0.05, 0.4), (0.3, 1.5), (3.0, 6.0)]))
 def test_sweep_groups_equals_the_plane_test_box_by_box(seed, order, reach):
-    """shadows.sweep_groups (the group boxes of a grid's positions tested first) against
+    """casters.sweep_groups (the group boxes of a grid's positions tested first) against
     the test written out in numpy, box by box: the same casters, rows ascending, the same
     masks. Grid positions in cells (coherent groups, most of them rejected whole, some
     across a plane) or in random order (a group box spans everything); volumes that hold a

@@ -14,8 +14,8 @@ from helpers import OracleP, Twin, assert_frame_sane, assert_frames_match, camer
 import lightsched as ls
 import lightsched.reference as ref
 
-# Each test runs with both kinds of object grid of the fast path (conftest.py).
-pytestmark = pytest.mark.usefixtures("grid_kind")
+# The tests that make fast schedulers run with both kinds of object grid of the fast path:
+# they take the ``tuning`` fixture (conftest.py) and give it to each.
 
 GRID = 2.0**-16
 
@@ -25,8 +25,8 @@ def snap(x):
     return np.round(np.asarray(x, float) / GRID) * GRID
 
 
-def run(lights, objects, cams, config=None, frames=1, plan=None, tie_rel=1e-9):
-    t = Twin(config or ls.Config(), tie_rel=tie_rel)
+def run(lights, objects, cams, config=None, frames=1, plan=None, tie_rel=1e-9, *, tuning):
+    t = Twin(config or ls.Config(), tie_rel=tie_rel, tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     out = [t.frame(cams, dt=0.1, plan=plan) for _ in range(frames)]
@@ -61,19 +61,19 @@ CFG_IDS = ["contribution", "thesis", "dir-in-slots"]
 
 
 @pytest.mark.parametrize("cfg", CONFIGS, ids=CFG_IDS)
-def test_zero_extent_objects(cfg):
+def test_zero_extent_objects(cfg, tuning):
     rng = np.random.default_rng(1)
     lights = mixed_lights(rng, 30)
     objs = boxes(rng, 40, half=(0.0, 0.0))
     # Points exactly on light spheres, and on a light's position.
     objs["bounds_min"][:3] = objs["bounds_max"][:3] = lights["position"][:3] + [[0, 0, 0]]
     objs["bounds_min"][3] = objs["bounds_max"][3] = lights["position"][3] + [lights["radius"][3], 0, 0]
-    _, [(ff, _)] = run(lights, objs, [camera(position=(0, 0, -10))], cfg)
+    _, [(ff, _)] = run(lights, objs, [camera(position=(0, 0, -10))], cfg, tuning=tuning)
     assert ff.visible.sum() > 30 and ff.count[:3].min() >= 1
 
 
 @pytest.mark.parametrize("cfg", CONFIGS, ids=CFG_IDS)
-def test_light_inside_object(cfg):
+def test_light_inside_object(cfg, tuning):
     rng = np.random.default_rng(2)
     lights = mixed_lights(rng, 20)
     lights["type"][:] = np.where(lights["type"] == 2, 0, lights["type"])
@@ -81,12 +81,12 @@ def test_light_inside_object(cfg):
     c = (objs["bounds_min"] + objs["bounds_max"]) / 2
     lights["position"] = c  # every light at its box's centre
     objs["bounds_min"][5] = objs["bounds_max"][5] = c[5]  # and one box is the light's point
-    _, [_, (ff, _)] = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=2)
+    _, [_, (ff, _)] = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=2, tuning=tuning)
     assert np.all(ff.count[ff.visible] >= 1)
 
 
 @pytest.mark.parametrize("cfg", CONFIGS, ids=CFG_IDS)
-def test_camera_inside_light_and_light_at_camera(cfg):
+def test_camera_inside_light_and_light_at_camera(cfg, tuning):
     rng = np.random.default_rng(3)
     cam_pos = np.array([1.0, 2.0, -3.0])
     lights = mixed_lights(rng, 12, centre=cam_pos, spread=2.0, radius=(3.0, 30.0))
@@ -97,7 +97,7 @@ def test_camera_inside_light_and_light_at_camera(cfg):
     objs = boxes(rng, 30, centre=cam_pos + [0, 0, 10], spread=10.0)
     cams = [camera(position=cam_pos, forward=(0.2, 0.1, 1.0)),
             camera(position=cam_pos, forward=(-1.0, 0.0, 0.0), focus=(0.5, -0.9), id=1)]
-    _, [_, (ff, _)] = run(lights, objs, cams, cfg, frames=2)
+    _, [_, (ff, _)] = run(lights, objs, cams, cfg, frames=2, tuning=tuning)
     assert 0 in ff.visible_lights.tolist() and 1 in ff.visible_lights.tolist()
 
 
@@ -105,18 +105,19 @@ def test_camera_inside_light_and_light_at_camera(cfg):
 @pytest.mark.parametrize("forward,up", [((0, 1, 0), (0, 0, 1)), ((0, -1, 0), (1, 0, 0)),
                                         ((0, 1e-150, 0), (0, 0, -1))],
                          ids=["up", "down", "tiny-forward"])
-def test_looking_straight_up_and_down(cfg, forward, up):
+def test_looking_straight_up_and_down(cfg, forward, up, tuning):
     rng = np.random.default_rng(4)
     sign = 1.0 if forward[1] > 0 else -1.0
     lights = mixed_lights(rng, 30, centre=(0, 20 * sign, 0))
     objs = boxes(rng, 40, centre=(0, 20 * sign, 0))
-    _, [(ff, _)] = run(lights, objs, [camera(forward=forward, up=up, fov_y=1.2, aspect=1.7)], cfg)
+    _, [(ff, _)] = run(lights, objs, [camera(forward=forward, up=up, fov_y=1.2, aspect=1.7)], cfg,
+                       tuning=tuning)
     assert ff.visible.sum() > 5
 
 
 @pytest.mark.parametrize("cfg", CONFIGS, ids=CFG_IDS)
 @pytest.mark.parametrize("fov", [1e-6, math.pi - 1e-6, 1e-12, math.pi - 1e-12])
-def test_extreme_fov(cfg, fov):
+def test_extreme_fov(cfg, fov, tuning):
     rng = np.random.default_rng(5)
     lights = mixed_lights(rng, 40)
     objs = boxes(rng, 50)
@@ -127,17 +128,17 @@ def test_extreme_fov(cfg, fov):
     lights["type"][0] = 0
     for aspect in (1.0, 1e-3, 1e3):
         _, [(ff, _)] = run(lights, objs, [camera(position=(0, 0, -10), fov_y=fov, aspect=aspect)],
-                           cfg)
+                           cfg, tuning=tuning)
         assert ff.visible[0]
 
 
 @pytest.mark.parametrize("n_lights,n_objects", [(0, 10), (10, 0), (0, 0)])
 @pytest.mark.parametrize("cfg", CONFIGS, ids=CFG_IDS)
-def test_empty_scenes(cfg, n_lights, n_objects):
+def test_empty_scenes(cfg, n_lights, n_objects, tuning):
     rng = np.random.default_rng(6)
     lights = mixed_lights(rng, n_lights)
     objs = boxes(rng, n_objects)
-    t, frames = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=3)
+    t, frames = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=3, tuning=tuning)
     for ff, fo in frames:
         assert ff.light_ids.shape == (n_objects, cfg.max_lights)
         assert ff.count.sum() == 0 and fo.count.sum() == 0
@@ -148,7 +149,7 @@ def test_empty_scenes(cfg, n_lights, n_objects):
 
 
 @pytest.mark.parametrize("n_objects", [1, 2], ids=["brute", "grid"])
-def test_twenty_thousand_lights_on_one_point_fast(n_objects):
+def test_twenty_thousand_lights_on_one_point_fast(n_objects, tuning):
     """Fast only (the oracle would take minutes): equal P, so the K lowest ids win."""
     n, k = 20000, 8
     rng = np.random.default_rng(7)
@@ -158,7 +159,7 @@ def test_twenty_thousand_lights_on_one_point_fast(n_objects):
               "intensity": np.full(n, 3.0)}
     lo = np.array([[0.0, 1.0, 29.0], [-2.0, 1.5, 30.5]])[:n_objects]
     objs = {"id": np.arange(n_objects) + 10, "bounds_min": lo, "bounds_max": lo + 2.0}
-    s = ls.Scheduler(ls.Config(max_lights=k))
+    s = ls.Scheduler(ls.Config(max_lights=k), tuning)
     s.set_lights(**lights)
     s.set_objects(**objs)
     cams = [camera(position=(0, 0, -10))]
@@ -175,7 +176,7 @@ def test_twenty_thousand_lights_on_one_point_fast(n_objects):
         assert f.light_index[0].tolist() == list(range(k))
 
 
-def test_three_hundred_lights_on_one_point_vs_oracle():
+def test_three_hundred_lights_on_one_point_vs_oracle(tuning):
     n = 300
     rng = np.random.default_rng(8)
     ids = rng.permutation(1000)[:n]
@@ -185,7 +186,7 @@ def test_three_hundred_lights_on_one_point_vs_oracle():
               "intensity": np.full(n, 2.0)}
     objs = boxes(rng, 30, centre=(0, 0, 22), spread=4.0)
     for cfg in CONFIGS:
-        t, frames = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=2)
+        t, frames = run(lights, objs, [camera(position=(0, 0, -10))], cfg, frames=2, tuning=tuning)
         assert not t.diverged
         ff, _ = frames[0]
         for o in np.flatnonzero(ff.count):
@@ -197,7 +198,7 @@ def test_three_hundred_lights_on_one_point_vs_oracle():
                     assert row[a] < row[a + 1]
 
 
-def test_radii_from_micrometres_to_a_million_km():
+def test_radii_from_micrometres_to_a_million_km(tuning):
     rng = np.random.default_rng(9)
     n = 120
     lights = mixed_lights(rng, n)
@@ -212,12 +213,12 @@ def test_radii_from_micrometres_to_a_million_km():
     objs["bounds_min"][1] = objs["bounds_max"][1] = (0.0, 0.0, 20.0)
     cams = [camera(position=(0, 0, -10), far=1e4)]
     for cfg in CONFIGS:
-        _, [(f1, _)] = run(lights, objs, cams, cfg, plan="brute force")
+        _, [(f1, _)] = run(lights, objs, cams, cfg, plan="brute force", tuning=tuning)
         assert f1.candidates[1] >= 2
         if cfg.model == "contribution":
             assert 3 in f1.light_ids[0].tolist()  # r = 1e9 at the box centre: P = 7 / r0^2
     # precision "fast" (float32 paths): no overflow, no NaN; not compared with the oracle.
-    s = ls.Scheduler(ls.Config(max_lights=4, precision="fast"))
+    s = ls.Scheduler(ls.Config(max_lights=4, precision="fast"), tuning)
     s.set_lights(**lights)
     s.set_objects(**objs)
     for _ in range(2):
@@ -226,7 +227,7 @@ def test_radii_from_micrometres_to_a_million_km():
     lights2 = mixed_lights(rng, 300)
     lights2["radius"] = 10.0 ** rng.uniform(-6, 9, 300)
     objs2 = boxes(rng, 200)
-    run(lights2, objs2, cams, ls.Config(max_lights=6), plan="grid")
+    run(lights2, objs2, cams, ls.Config(max_lights=6), plan="grid", tuning=tuning)
 
 
 # --------------------------------------------------------------------------- exact ties
@@ -255,12 +256,12 @@ def tie_scene():
 
 @pytest.mark.parametrize("model", ["contribution", "thesis"])
 @pytest.mark.parametrize("k", [1, 3, 6])
-def test_exact_ties_on_grid_identity(model, k):
+def test_exact_ties_on_grid_identity(model, k, tuning):
     lights, objs = tie_scene()
     assert np.array_equal(snap(lights["position"]), lights["position"])
     cam = camera(position=(0.25, -0.5, 0.0), near=0.5, far=64.0)
     cfg = ls.Config(max_lights=k, model=model, hysteresis=0.0)
-    t = Twin(cfg, tie_rel=0.0)
+    t = Twin(cfg, tie_rel=0.0, tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objs)
     ff, fo = t.frame([cam])
@@ -291,7 +292,7 @@ def test_exact_ties_on_grid_identity(model, k):
 # --------------------------------------------------------------------------- huge objects
 
 
-def test_huge_object_touched_by_thousands_of_lights():
+def test_huge_object_touched_by_thousands_of_lights(tuning):
     rng = np.random.default_rng(10)
     n = 3000
     lights = mixed_lights(rng, n, centre=(0, 0, 2000), spread=1000.0, radius=(5.0, 60.0))
@@ -301,10 +302,10 @@ def test_huge_object_touched_by_thousands_of_lights():
             "bounds_max": np.array([[5000.0, 1.0, 7000.0]] + [[x + 2.0, 2.0, 2003.0] for x in range(21)])}
     cam = camera(position=(0, 50, -100), forward=(0, -0.2, 1), far=1e4, fov_y=1.5, aspect=2.0)
     for cfg in (ls.Config(max_lights=8), ls.Config(max_lights=5, model="thesis", hysteresis=0.0)):
-        t, [(ff, _), _] = run(lights, objs, [cam], cfg, frames=2, plan="grid")
+        t, [(ff, _), _] = run(lights, objs, [cam], cfg, frames=2, plan="grid", tuning=tuning)
         assert ff.candidates[0] > 1000 and ff.count[0] == cfg.max_lights
     _, [(fb, _)] = run(lights, {k: v[:1] for k, v in objs.items()}, [cam], ls.Config(max_lights=8),
-                       plan="brute force")
+                       plan="brute force", tuning=tuning)
     assert fb.candidates[0] > 1000
 
 
@@ -333,8 +334,13 @@ def grid_cameras(offset):
                    far=64.0, id=3)]
 
 
-def translated_run(cls, cfg, lights, objs, offset, frames=4):
-    s = cls(cfg)
+def new_scheduler(cls, cfg, tuning):
+    """A fast scheduler with ``tuning``, or an oracle (which has none)."""
+    return cls(cfg, tuning) if cls is ls.Scheduler else cls(cfg)
+
+
+def translated_run(cls, cfg, lights, objs, offset, frames=4, *, tuning):
+    s = new_scheduler(cls, cfg, tuning)
     o = np.asarray(offset, float)
     s.set_lights(**{**lights, "position": lights["position"] + o})
     s.set_objects(**{**objs, "bounds_min": objs["bounds_min"] + o, "bounds_max": objs["bounds_max"] + o})
@@ -357,35 +363,40 @@ MODELS = [ls.Config(max_lights=5), ls.Config(max_lights=4, model="thesis"),
 
 @pytest.mark.parametrize("cfg", MODELS, ids=CFG_IDS)
 @pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
-def test_translation_on_grid_is_exact(cls, cfg):
+def test_translation_on_grid_is_exact(cls, cfg, tuning):
     base_l, base_o = grid_scene(11)
-    base = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, (0, 0, 0))
+    base = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, (0, 0, 0),
+                          tuning=tuning)
     assert sum(int(f.count.sum()) for f in base) > 50
     for off in OFFSETS:
-        moved = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off)
+        moved = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off, tuning=tuning)
         for i, (a, b) in enumerate(zip(base, moved, strict=True)):
             assert_frames_match(b, a, tie_rel=0.0, bitwise=True, what=f"offset {off} frame {i}")
 
 
 @pytest.mark.parametrize("cfg", MODELS[:2], ids=CFG_IDS[:2])
-def test_translation_on_grid_fast_equals_oracle(cfg):
+def test_translation_on_grid_fast_equals_oracle(cfg, tuning):
     base_l, base_o = grid_scene(12)
     for off in OFFSETS:
-        f = translated_run(ls.Scheduler, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off)
-        r = translated_run(ref.Scheduler, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off)
+        f = translated_run(ls.Scheduler, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off,
+                           tuning=tuning)
+        r = translated_run(ref.Scheduler, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off,
+                           tuning=tuning)
         for i, (a, b) in enumerate(zip(f, r, strict=True)):
             assert_frames_match(a, b, tie_rel=0.0, bitwise=True, what=f"offset {off} frame {i}")
 
 
 @pytest.mark.parametrize("cfg", MODELS, ids=CFG_IDS)
-def test_translation_off_grid_up_to_near_ties(cfg):
+def test_translation_off_grid_up_to_near_ties(cfg, tuning):
     """Off the grid, coordinates near 1e7 m round to ~2e-9 m: P move by about that over the
     distance, so sets agree up to near-ties of that size (rel 1e-6 here) and P to 1e-6."""
     base_l, base_o = grid_scene(13, snap_it=False)
     for cls in (ls.Scheduler, ref.Scheduler):
-        base = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, (0, 0, 0))
+        base = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, (0, 0, 0),
+                              tuning=tuning)
         for off in OFFSETS:
-            moved = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off)
+            moved = translated_run(cls, cfg, {k: v.copy() for k, v in base_l.items()}, base_o, off,
+                                   tuning=tuning)
             for i, (a, b) in enumerate(zip(base, moved, strict=True)):
                 tied = assert_frames_match(b, a, rel=1e-6, tie_rel=1e-6, what=f"offset {off} frame {i}")
                 if tied:
@@ -401,7 +412,7 @@ def shuffled(d, perm):
 
 @pytest.mark.parametrize("cls", [ls.Scheduler, ref.Scheduler], ids=["fast", "oracle"])
 @pytest.mark.parametrize("n", [(40, 60), (220, 260)], ids=["brute", "grid"])
-def test_input_order_does_not_matter(cls, n):
+def test_input_order_does_not_matter(cls, n, tuning):
     n_l, n_o = n
     rng = np.random.default_rng(14)
     lights, objs = grid_scene(14, n_l, n_o, snap_it=False)
@@ -411,7 +422,7 @@ def test_input_order_does_not_matter(cls, n):
     cfg = ls.Config(max_lights=4, hysteresis=0.2)
     results = []
     for trial in range(3):
-        s = cls(cfg)
+        s = new_scheduler(cls, cfg, tuning)
         pl = rng.permutation(n_l) if trial else np.arange(n_l)
         po = rng.permutation(n_o) if trial else np.arange(n_o)
         s.set_lights(**shuffled(lights, pl))
@@ -432,7 +443,7 @@ def test_input_order_does_not_matter(cls, n):
             frames_identical(a, b, f"trial {trial} frame {i}")
 
 
-def test_thread_count_does_not_matter():
+def test_thread_count_does_not_matter(tuning):
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has a single thread")
     lights, objs = grid_scene(15, 400, 1500, snap_it=False)
@@ -442,7 +453,7 @@ def test_thread_count_does_not_matter():
     try:
         for threads in (1, 2):
             numba.set_num_threads(threads)
-            s = ls.Scheduler(cfg)
+            s = ls.Scheduler(cfg, tuning)
             s.set_lights(**lights)
             s.set_objects(**objs)
             rng = np.random.default_rng(3)
@@ -463,7 +474,7 @@ def test_thread_count_does_not_matter():
         frames_identical(a, b, f"frame {i}")
 
 
-def test_spot_whose_inner_and_outer_cosines_round_equal():
+def test_spot_whose_inner_and_outer_cosines_round_equal(tuning):
     """inner a few ulps below outer: cos(inner) == cos(outer), so DESIGN's ramp would divide
     by zero; both implementations take the step profile (as for inner == outer)."""
     outer = 0.05
@@ -475,7 +486,7 @@ def test_spot_whose_inner_and_outer_cosines_round_equal():
     objs = dict(id=[0], bounds_min=[[-0.1, -0.1, 14.9]], bounds_max=[[0.1, 0.1, 15.1]])
     cam = ls.Camera(position=[0, 0, 0], forward=[0, 0, 1], up=[0, 1, 0], fov_y=1.0, aspect=1.0,
                     near=0.1, far=100.0)
-    fast = ls.schedule(lights, objs, [cam])
+    fast = ls.schedule(lights, objs, [cam], tuning=tuning)
     oracle = ref.schedule(lights, objs, [cam])
     assert fast.light_ids[0, :2].tolist() == oracle.light_ids[0, :2].tolist() == [1, 2]
     assert fast.priority[0, 0] == oracle.priority[0, 0] == oracle.priority[0, 1]

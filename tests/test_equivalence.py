@@ -17,8 +17,8 @@ import lightsched as ls
 import lightsched.reference as ref
 from lightsched.scenes import city, move_lights
 
-# Each test runs with both kinds of object grid of the fast path (conftest.py).
-pytestmark = pytest.mark.usefixtures("grid_kind")
+# The tests that make fast schedulers run with both kinds of object grid of the fast path:
+# they take the ``tuning`` fixture (conftest.py) and give it to each.
 
 # --------------------------------------------------------------------------- strategies
 
@@ -155,8 +155,8 @@ def scenes(draw, max_lights: int = 16, max_objects: int = 12) -> dict[str, Any]:
 
 @examples(4.0)
 @given(sc=scenes())
-def test_one_frame_matches_oracle(sc):
-    t = Twin(sc["config"])
+def test_one_frame_matches_oracle(sc, tuning):
+    t = Twin(sc["config"], tuning=tuning)
     t.set_lights(**as_kwargs(sc["lights"]))
     t.set_objects(**as_kwargs(sc["objects"], kind="objects"))
     dt = 1 / 60
@@ -219,12 +219,12 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
     with grid positions in cells (groups inside, outside and across the planes) or in
     random order (every group across them), boxes read by row or from records in grid
     order, over three passes: the cameras, others after some objects moved within their
-    group boxes, widened in place (shadows.widen_group_boxes), then the first ones again.
+    group boxes, widened in place (grid.widen_group_boxes), then the first ones again.
     From the second pass on it is given the last pass's flags and classes too, and gives
     the same as without them. Its box holds the visible objects' and lies within the
     group boxes."""
     from lightsched.frustum import IN, OUT, objects_visible_groups
-    from lightsched.shadows import group_boxes, widen_group_boxes
+    from lightsched.grid import group_boxes, widen_group_boxes
 
     rng, lo, hi, f, want = _visibility_scene(cams, seed, n)
     if order == "cells":
@@ -279,9 +279,9 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
 
 @examples(1.0)
 @given(sc=scenes())
-def test_stateless_schedule_matches_oracle(sc):
+def test_stateless_schedule_matches_oracle(sc, tuning):
     lk, ok = as_kwargs(sc["lights"]), as_kwargs(sc["objects"], kind="objects")
-    ff = ls.schedule(lk, ok, sc["cameras"], sc["config"])
+    ff = ls.schedule(lk, ok, sc["cameras"], sc["config"], tuning=tuning)
     fo = ref.schedule(lk, ok, sc["cameras"], sc["config"])
     assert_frames_match(ff, fo)
 
@@ -379,8 +379,8 @@ def step_scene(data, t: Twin, lights: dict, objects: dict, used_l: set, used_o: 
 
 @examples(2.0)
 @given(sc=scenes(), data=st.data())
-def test_sequence_matches_oracle(sc, data):
-    t = Twin(sc["config"])
+def test_sequence_matches_oracle(sc, data, tuning):
+    t = Twin(sc["config"], tuning=tuning)
     lights, objects = dict(sc["lights"]), dict(sc["objects"])
     used_l, used_o = set(lights), set(objects)
     t.set_lights(**as_kwargs(lights))
@@ -433,9 +433,9 @@ def big_scene(seed: int, n_obj: int, n_light: int, spot_share: float = 0.3,
 
 @examples(0.3)
 @given(seed=st.integers(0, 2**32 - 1), cfg=configs(), frames=st.integers(2, 4))
-def test_grid_path_sequence_matches_oracle(seed, cfg, frames):
+def test_grid_path_sequence_matches_oracle(seed, cfg, frames, tuning):
     lights, objects, cams = big_scene(seed, 250, 160)
-    t = Twin(cfg)
+    t = Twin(cfg, tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     rng = np.random.default_rng(seed + 1)
@@ -455,13 +455,13 @@ def test_grid_path_sequence_matches_oracle(seed, cfg, frames):
         # how many are left, and either path must agree with the oracle)
 
 
-def test_both_pair_paths_are_exercised():
+def test_both_pair_paths_are_exercised(tuning):
     lights, objects, cams = big_scene(7, 250, 160)
-    t = Twin(ls.Config(max_lights=4))
+    t = Twin(ls.Config(max_lights=4), tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     t.frame(cams, plan="grid")
-    t2 = Twin(ls.Config(max_lights=4))
+    t2 = Twin(ls.Config(max_lights=4), tuning=tuning)
     small_l, small_o, _ = big_scene(7, 100, 40)
     t2.set_lights(**small_l)
     t2.set_objects(**small_o)
@@ -474,7 +474,8 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype, parts):
     """The pair cache is the light-major pairs sorted by object row, each object's lights in
     the walk's order, with either histogram width (int64 serves from 2^31 pairs) and on
     one thread (one run of lights) or in parallel runs."""
-    from lightsched.pairs import GROUP_PARTS, SERIAL_PAIRS, group_pairs, group_parts
+    from lightsched.group import SERIAL_PAIRS, group_pairs, group_parts
+    from lightsched.jit import GROUP_PARTS
 
     assert group_parts(SERIAL_PAIRS - 1) == 1 and group_parts(SERIAL_PAIRS) == GROUP_PARTS
 
@@ -498,14 +499,14 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype, parts):
     assert np.array_equal(heap[1], light[order])
 
 
-def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
+def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two(tuning):
     """Below SERIAL_LIGHTS lights the per-light kernels loop on the calling thread (the
     oracle tests' scenes), from it in parallel: a prefix of the lights gets the same rows
     from the serial loop as from the parallel one. The packing of some rows in place (an
     incremental frame's changed lights) writes those rows as a whole packing does, and no
     other; the packing of one part of them (PACK_*) those columns and no other."""
+    from lightsched.candidates import SERIAL_SPHERES, left_spheres
     from lightsched.frustum import SERIAL_LIGHTS, lights_visible
-    from lightsched.pairs import SERIAL_SPHERES, left_spheres, light_bounds
     from lightsched.priority import (
         PACK_ALL,
         PACK_AXIS,
@@ -517,15 +518,16 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
         _pack,
         light_columns,
     )
+    from lightsched.walk import light_bounds
 
     scene = city(3000, 3 * SERIAL_LIGHTS, seed=4, shadow_fraction=0.05)
-    s = ls.Scheduler(ls.Config(max_lights=8, model="thesis"))
+    s = ls.Scheduler(ls.Config(max_lights=8, model="thesis"), tuning)
     s.set_lights(**scene.lights)
     s.set_objects(**scene.objects)
     s.frame(scene.cameras)
-    c, lights = s._cache, s.lights
+    c, lights = s._last, s.lights
     n, few = len(lights), SERIAL_LIGHTS - 1
-    f = c.frames
+    f = c.cameras.frames
 
     UNSET = -7.25e300
 
@@ -568,8 +570,8 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     vis = [lights_visible(lights.type[:m], lights.position[:m], lights.radius[:m], f.plane_n,
                           f.plane_p) for m in (n, few)]
     assert np.array_equal(vis[0][:few], vis[1]) and vis[1].any() and not vis[1].all()
-    hot, n_vis = c.packed[0], c.grid.vis[0].shape[0]
-    bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.grid, n_vis)
+    hot, n_vis = c.packed.rows[0], c.grid.records[0].shape[0]
+    bounds = [light_bounds(hot, np.arange(m, dtype=np.int32), c.grid.index, n_vis)
               for m in (n, few)]
     assert np.array_equal(bounds[0][:few + 1], bounds[1]) and bounds[1][-1] > 0
     # left_spheres (serial below SERIAL_SPHERES lights): spheres round the lights' own
@@ -585,16 +587,18 @@ def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two():
     left = [left_spheres(spheres[:m], anchor[:m], own[:m]) for m in (m_big, few_s)]
     assert np.array_equal(left[0][:few_s], left[1]) and left[1].any() and not left[1].all()
     # The rows read at random (packed lights, object records) start on a cache line.
-    assert all(a.ctypes.data % 64 == 0 for a in (*c.packed, *s._buffers.values()))
+    assert all(a.ctypes.data % 64 == 0
+               for a in (*c.packed.rows, *s._buffers._named.values()))
 
 
-def test_grid_with_big_objects_big_lights_and_directional_in_slots():
+def test_grid_with_big_objects_big_lights_and_directional_in_slots(tuning):
     """Objects larger than a cell are tested by every light directly; huge lights walk
     every cell; directional lights in slots take every visible object."""
     lights, objects, cams = big_scene(11, 260, 170, dir_count=5)
     lights["radius"][5:25] = 400.0
     objects["bounds_max"][:4] = objects["bounds_min"][:4] + 300.0
-    t = Twin(ls.Config(max_lights=8, directional_in_slots=True, hysteresis=0.2))
+    t = Twin(ls.Config(max_lights=8, directional_in_slots=True, hysteresis=0.2),
+             tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     ff, _ = t.frame(cams, plan="grid")
@@ -608,9 +612,10 @@ def test_grid_with_big_objects_big_lights_and_directional_in_slots():
 
 
 @pytest.mark.parametrize("model", ["contribution", "thesis"])
-def test_city_animation_matches_oracle(model):
+def test_city_animation_matches_oracle(model, tuning):
     scene = city(2000, 200, seed=3, shadow_fraction=0.1)
-    t = Twin(ls.Config(max_lights=6, model=model, fade_in=0.05, fade_out=0.05))
+    t = Twin(ls.Config(max_lights=6, model=model, fade_in=0.05, fade_out=0.05),
+             tuning=tuning)
     t.set_lights(**scene.lights)
     t.set_objects(**scene.objects)
     for i in range(5):

@@ -18,8 +18,8 @@ from test_equivalence import big_scene, configs
 import lightsched as ls
 from lightsched.scenes import city, move_lights
 
-# Each test runs with both kinds of object grid of the fast path (conftest.py).
-pytestmark = pytest.mark.usefixtures("grid_kind")
+# Each test runs with both kinds of object grid of the fast path: it takes the ``tuning``
+# fixture (conftest.py) and gives it to every scheduler it makes.
 
 GRID = 2.0**-16
 
@@ -44,10 +44,10 @@ def _grid_scene(seed: int, offset: float) -> tuple[dict, dict, list[ls.Camera]]:
 
 @examples(0.2)
 @given(seed=st.integers(0, 2**32 - 1), cfg=configs(), offset=st.sampled_from([0.0, 1e7]))
-def test_fast_equals_exact_on_the_grid_near_the_first_camera(seed, cfg, offset):
+def test_fast_equals_exact_on_the_grid_near_the_first_camera(seed, cfg, offset, tuning):
     lights, objects, cams = _grid_scene(seed, offset)
-    exact = ls.Scheduler(cfg)
-    fast = ls.Scheduler(ls.Config(**{**cfg.to_dict(), "precision": "fast"}))
+    exact = ls.Scheduler(cfg, tuning)
+    fast = ls.Scheduler(ls.Config(**{**cfg.to_dict(), "precision": "fast"}), tuning)
     for s in (exact, fast):
         s.set_lights(**lights)
         s.set_objects(**objects)
@@ -72,9 +72,9 @@ def test_fast_equals_exact_on_the_grid_near_the_first_camera(seed, cfg, offset):
             assert not ff.stats["plan"]["frame"].startswith("full"), ff.stats["plan"]
 
 
-def test_fast_records_are_made_again_when_the_camera_goes_far():
+def test_fast_records_are_made_again_when_the_camera_goes_far(tuning):
     lights, objects, cams = big_scene(9, 150, 90)
-    s = ls.Scheduler(ls.Config(precision="fast", max_lights=4))
+    s = ls.Scheduler(ls.Config(precision="fast", max_lights=4), tuning)
     s.set_lights(**lights)
     s.set_objects(**objects)
     s.frame(cams)
@@ -89,11 +89,12 @@ def test_fast_records_are_made_again_when_the_camera_goes_far():
         assert_frame_sane(f, 4, f"camera + {step} m")
 
 
-def test_fast_on_a_city_is_close_to_exact():
+def test_fast_on_a_city_is_close_to_exact(tuning):
     """Off the grid, float32 records round by up to 2^-24 of the distance to the camera:
     pairs at the edge of a light's range and near-ties can change, little else."""
     scene = city(20_000, 2_000, seed=5, shadow_fraction=0.02, sun_shadows=True)
-    exact, fast = ls.Scheduler(ls.Config()), ls.Scheduler(ls.Config(precision="fast"))
+    exact = ls.Scheduler(ls.Config(), tuning)
+    fast = ls.Scheduler(ls.Config(precision="fast"), tuning)
     for s in (exact, fast):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
@@ -113,12 +114,12 @@ def test_fast_on_a_city_is_close_to_exact():
 
 
 @pytest.mark.parametrize("scale", [1e-6, 1.0, 1e9])
-def test_fast_precision_takes_extreme_radii(scale):
+def test_fast_precision_takes_extreme_radii(scale, tuning):
     """No overflow or NaN in the float32 records whatever the radii (DESIGN section 5)."""
     lights, objects, cams = big_scene(3, 150, 90)
     lights["radius"] = lights["radius"] * scale
-    s = ls.Scheduler(ls.Config(precision="fast", max_lights=4))
-    e = ls.Scheduler(ls.Config(max_lights=4))
+    s = ls.Scheduler(ls.Config(precision="fast", max_lights=4), tuning)
+    e = ls.Scheduler(ls.Config(max_lights=4), tuning)
     for x in (s, e):
         x.set_lights(**lights)
         x.set_objects(**objects)

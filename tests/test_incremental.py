@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from typing import Any
 
 import numpy as np
@@ -17,26 +18,27 @@ from hypothesis import strategies as st
 from test_equivalence import big_scene, configs
 
 import lightsched as ls
-from lightsched import scheduler
+import lightsched.objects
+from lightsched.buffers import Buffers
+from lightsched.candidates import compact_light_lists, reached_rows, widen_walkers
 from lightsched.frame import rows_not_in
-from lightsched.pairs import (
-    compact_light_lists,
-    reached_rows,
-    visible_objects,
-    widen_walkers,
-)
+from lightsched.grid import shown_mask, visible_objects
 from lightsched.scenes import city, move_lights
 from lightsched.simd import SHOWN
+from lightsched.tuning import Tuning
 
-# Each test runs with both kinds of object grid of the fast path (conftest.py).
-pytestmark = pytest.mark.usefixtures("grid_kind")
+# The tests that make fast schedulers run with both kinds of object grid of the fast path:
+# they take the ``tuning`` fixture (conftest.py) and give it to each.
 
 
 class FullEveryFrame(ls.Scheduler):
-    """The fast scheduler with its incremental paths turned off: every frame is full."""
+    """The fast scheduler with its incremental paths turned off: every frame is full and
+    keeps nothing of the last frame's stage outputs (as after a frame that stopped half
+    way), so it makes everything anew."""
 
-    def _changes(self, c: Any, same_cams: bool, frames: Any) -> tuple[Any, ...]:
-        return "forced by the test", None, None, None
+    def _frame(self, cameras: Any, dt: float, cut: bool) -> ls.Frame:
+        self._last = None
+        return super()._frame(cameras, dt, cut)
 
 
 def _plan(f: ls.Frame) -> str:
@@ -50,16 +52,17 @@ def _moved_camera(cam: ls.Camera, dx: float) -> ls.Camera:
                      focus=cam.focus)
 
 
-def _twin(cfg: ls.Config, seed: int = 5) -> tuple[Twin, dict, dict, list[ls.Camera]]:
+def _twin(cfg: ls.Config, tuning: Tuning, seed: int = 5
+          ) -> tuple[Twin, dict, dict, list[ls.Camera]]:
     lights, objects, cams = big_scene(seed, 250, 160)
-    t = Twin(cfg)
+    t = Twin(cfg, tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     return t, lights, objects, cams
 
 
-def test_unchanged_frame_shares_the_last_frames_arrays():
-    t, _, _, cams = _twin(ls.Config(max_lights=4))
+def test_unchanged_frame_shares_the_last_frames_arrays(tuning):
+    t, _, _, cams = _twin(ls.Config(max_lights=4), tuning)
     t.frame(cams)
     # The second frame still ranks the shadowed lights again: those of the first frame
     # now have their hysteresis bonus (the order may change once).
@@ -76,8 +79,8 @@ def test_unchanged_frame_shares_the_last_frames_arrays():
     assert _plan(f3).startswith("unchanged"), f3.stats["plan"]
 
 
-def test_fading_slots_are_stepped_when_nothing_moved():
-    t, lights, _, cams = _twin(ls.Config(max_lights=2, fade_in=0.1, fade_out=0.1))
+def test_fading_slots_are_stepped_when_nothing_moved(tuning):
+    t, lights, _, cams = _twin(ls.Config(max_lights=2, fade_in=0.1, fade_out=0.1), tuning)
     t.frame(cams)
     rows = np.arange(0, 160, 4)
     lights["position"][rows] += 3.0
@@ -99,10 +102,10 @@ def test_fading_slots_are_stepped_when_nothing_moved():
 @pytest.mark.parametrize("field", ["position", "intensity", "mask", "type", "radius",
                                    "priority", "shadows", "direction", "outer_angle",
                                    "inner_angle"])
-def test_changed_lights_recompute_only_the_objects_they_touch(field):
+def test_changed_lights_recompute_only_the_objects_they_touch(field, tuning):
     cfg = ls.Config(max_lights=3, directional_in_slots=field == "type",
                     unshadowed="skip" if field == "shadows" else "light", shadow_budget=3)
-    t, lights, _, cams = _twin(cfg)
+    t, lights, _, cams = _twin(cfg, tuning)
     rng = np.random.default_rng(1)
     t.frame(cams)
     for i in range(3):
@@ -134,14 +137,14 @@ def test_changed_lights_recompute_only_the_objects_they_touch(field):
             or i == 0 and field == "type", f.stats["counts"]
 
 
-def test_moved_objects_get_new_pairs_against_every_light(grid_kind):
+def test_moved_objects_get_new_pairs_against_every_light(grid_kind, tuning):
     # Each object tested against every light, or against the lights of its cells in a
     # grid of the lights, made in the first frame that needs it and kept while no light
     # changes (conftest.grid_kind sets which).
     how = ["tested against"] * 3 if grid_kind == "every" else [
         "from the cells of a new grid of", "from the cells of a grid of",
         "from the cells of a grid of"]
-    t, _, objects, cams = _twin(ls.Config(max_lights=4, shadow_budget=4))
+    t, _, objects, cams = _twin(ls.Config(max_lights=4, shadow_budget=4), tuning)
     t.frame(cams)
     rng = np.random.default_rng(2)
     for i in range(3):
@@ -163,8 +166,8 @@ def test_moved_objects_get_new_pairs_against_every_light(grid_kind):
 
 
 @pytest.mark.parametrize("model", ["contribution", "thesis"])
-def test_camera_moves(model):
-    t, _, _, cams = _twin(ls.Config(max_lights=4, model=model, shadow_budget=2))
+def test_camera_moves(model, tuning):
+    t, _, _, cams = _twin(ls.Config(max_lights=4, model=model, shadow_budget=2), tuning)
     t.frame(cams)
     for i in range(1, 5):
         cam = _moved_camera(cams[0], 4.0 * i)
@@ -176,9 +179,9 @@ def test_camera_moves(model):
             assert "cameras moved" in _plan(f)
 
 
-def test_lights_and_objects_cross_the_edge_of_the_view():
+def test_lights_and_objects_cross_the_edge_of_the_view(tuning):
     """A narrow camera swinging across the scene: objects and lights enter and leave."""
-    t, lights, _, cams = _twin(ls.Config(max_lights=3, fade_in=0.05, fade_out=0.05))
+    t, lights, _, cams = _twin(ls.Config(max_lights=3, fade_in=0.05, fade_out=0.05), tuning)
     for i in range(8):
         a = -0.6 + 0.15 * i
         cam = ls.Camera(position=np.array([0.0, 0.0, -20.0]),
@@ -193,7 +196,7 @@ def test_lights_and_objects_cross_the_edge_of_the_view():
             assert _plan(f).startswith("incremental"), f.stats["plan"]
 
 
-def test_full_frames_leave_the_rows_of_objects_long_out_of_view_as_they_are():
+def test_full_frames_leave_the_rows_of_objects_long_out_of_view_as_they_are(tuning):
     """Every light moving (full frames) under a narrow camera turning left and right: the
     rows of objects out of view in this frame and the two before are empty in the arrays
     the frame takes back, and are not written again (the plan says how many); an object
@@ -201,7 +204,7 @@ def test_full_frames_leave_the_rows_of_objects_long_out_of_view_as_they_are():
     which a strong hysteresis reads when it comes back), and every frame is the
     oracle's."""
     t, lights, _, _ = _twin(ls.Config(max_lights=2, fade_in=0.05, fade_out=0.05,
-                                      hysteresis=3.0))
+                                      hysteresis=3.0), tuning)
     skipped = []
     for a in [0.0, -0.5, -0.5, 0.5, 0.5, 0.5, 0.0, -0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5]:
         cam = ls.Camera(position=np.array([0.0, 0.0, -20.0]),
@@ -222,8 +225,8 @@ def test_full_frames_leave_the_rows_of_objects_long_out_of_view_as_they_are():
     assert skipped[:2] == [0, 0] and min(skipped[2:]) > 0, skipped
 
 
-def test_a_cut_restarts_the_fades_without_recomputing_pairs():
-    t, lights, _, cams = _twin(ls.Config(max_lights=2))
+def test_a_cut_restarts_the_fades_without_recomputing_pairs(tuning):
+    t, lights, _, cams = _twin(ls.Config(max_lights=2), tuning)
     t.frame(cams)
     lights["position"][::5] += 2.0
     t.update_lights(id=lights["id"][::5], position=lights["position"][::5])
@@ -234,8 +237,8 @@ def test_a_cut_restarts_the_fades_without_recomputing_pairs():
     assert not np.any(f.fade_state == 1) and not np.any(f.fade_state == 3)
 
 
-def test_structural_changes_run_full_frames():
-    t, lights, objects, cams = _twin(ls.Config(max_lights=3))
+def test_structural_changes_run_full_frames(tuning):
+    t, lights, objects, cams = _twin(ls.Config(max_lights=3), tuning)
     t.frame(cams)
     t.remove_lights(id=lights["id"][:3])
     f, _ = t.frame(cams)
@@ -305,9 +308,9 @@ def _step(rng: np.random.Generator, op: str, t: Any, lights: dict, objects: dict
                                fade_in=0.0, fade_out=0.0, shadow_budget=127, cascades=1,
                                max_shadowed_per_object=0),
          ops=["none", "props", "none"])
-def test_mixed_sequence_matches_oracle(seed, cfg, ops):
+def test_mixed_sequence_matches_oracle(seed, cfg, ops, tuning):
     lights, objects, cams = big_scene(seed, 200, 120)
-    t = Twin(cfg)
+    t = Twin(cfg, tuning=tuning)
     t.set_lights(**lights)
     t.set_objects(**objects)
     rng = np.random.default_rng(seed)
@@ -320,8 +323,8 @@ def test_mixed_sequence_matches_oracle(seed, cfg, ops):
 class _Pair:
     """Two fast schedulers, incremental and full every frame, driven alike."""
 
-    def __init__(self, cfg: ls.Config) -> None:
-        self.a, self.b = ls.Scheduler(cfg), FullEveryFrame(cfg)
+    def __init__(self, cfg: ls.Config, tuning: Tuning) -> None:
+        self.a, self.b = ls.Scheduler(cfg, tuning), FullEveryFrame(cfg, tuning)
 
     def __getattr__(self, name: str) -> Any:
         def call(**kw: Any) -> None:
@@ -331,11 +334,11 @@ class _Pair:
 
 
 @pytest.mark.parametrize("seed,precision", [(0, "exact"), (1, "exact"), (2, "fast")])
-def test_incremental_city_is_bit_identical_to_full_frames(seed, precision):
+def test_incremental_city_is_bit_identical_to_full_frames(seed, precision, tuning):
     scene = city(20_000, 2_000, seed=seed, shadow_fraction=0.02, sun_shadows=True)
     cfg = ls.Config(max_lights=8, fade_in=0.1, fade_out=0.1, shadow_budget=4,
                     precision=precision)
-    p = _Pair(cfg)
+    p = _Pair(cfg, tuning)
     p.set_lights(**scene.lights)
     p.set_objects(**scene.objects)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
@@ -370,10 +373,10 @@ def _check_counts(s: ls.Scheduler, f: ls.Frame) -> None:
     """The frame's pair count is its cache's (kept as a count, summed here), and the
     objects' and the lights' candidate lists hold as many candidates (a full frame sizes
     its pair heap from the lights')."""
-    c = s._cache
+    c, cands = s._last.cache, s._last.pairs.candidates
     assert f.stats["counts"]["pairs"] == c.pairs == int(c.seg[:, 1].sum())
-    if c.cands is not None:
-        assert int(c.cands.lists[0][:, 1].sum()) == int(c.cands.by_light[0][:, 1].sum())
+    if cands is not None:
+        assert int(cands.lists[0][:, 1].sum()) == int(cands.by_light[0][:, 1].sum())
 
 
 def _cand_plan(f: ls.Frame) -> str:
@@ -382,12 +385,12 @@ def _cand_plan(f: ls.Frame) -> str:
     return m.group(1) if m else ""
 
 
-def _city_pair(cfg: ls.Config, seed: int, shadowed: float, inner: float
+def _city_pair(cfg: ls.Config, seed: int, shadowed: float, inner: float, tuning: Tuning
                ) -> tuple[_Pair, dict, dict, list[ls.Camera]]:
     """A _Pair on city(6000, 600) with every light mask bit and spot inner angles of
     ``inner`` times the outer ones: the pair, the lights' and objects' fields (copies, to
     change), the cameras."""
-    p = _Pair(cfg)
+    p = _Pair(cfg, tuning)
     scene = city(6_000, 600, seed=seed, shadow_fraction=shadowed, sun_shadows=True)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
     lights["mask"] = np.full(lights["id"].size, 0xFFFFFFFF, np.uint32)
@@ -399,7 +402,7 @@ def _city_pair(cfg: ls.Config, seed: int, shadowed: float, inner: float
 
 
 def test_compacted_light_lists_hold_each_lights_list_in_order():
-    """pairs.compact_light_lists: the lists by light, scattered over an array with garbage
+    """candidates.compact_light_lists: the lists by light, scattered over an array with garbage
     between them (as light_lists leaves them), packed in light order from 0, each list's
     objects in their order, with the asked-for room after them."""
     rng = np.random.default_rng(11)
@@ -418,11 +421,11 @@ def test_compacted_light_lists_hold_each_lights_list_in_order():
 
 
 def test_walkers_are_widened_and_led_along_their_last_step():
-    """pairs.widen_walkers: a walking light's row of the walk's table is its row of
-    light_hot with the radius x (1 + SKIN), every mask bit, the point type and, if it
-    moved, the centre LEAD x SKIN x radius ahead along its last step; a light that did not
+    """candidates.widen_walkers: a walking light's row of the walk's table is its row of
+    light_hot with the radius x (1 + skin), every mask bit, the point type and, if it
+    moved, the centre lead x skin x radius ahead along its last step; a light that did not
     move keeps its centre, and the rows of lights that do not walk are not written."""
-    skin, lead = scheduler.SKIN, scheduler.LEAD
+    skin, lead = Tuning().skin, Tuning().lead
     hot = np.zeros((3, 8))
     hot[:, :3] = [[1.0, 2.0, 3.0], [10.0, 0.0, 0.0], [0.0, 0.0, -4.0]]
     hot[:, 3] = [10.0, 4.0, 2.0]
@@ -444,9 +447,9 @@ def test_walkers_are_widened_and_led_along_their_last_step():
     assert (wide[2] == -7.0).all()
 
 
-def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
+def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind, tuning):
     """Full frames whose lights drift (objects and camera still) take their pairs from the
-    objects' candidate lists (scheduler._candidates): kept while each light stays inside
+    objects' candidate lists (candidates.update_candidates): kept while each light stays inside
     its widened sphere, edited for the lights that leave it (a list that outgrows its
     room moves to the spare room), made again when the spare room runs out or most lights
     leave. Bit for bit the frames of a scheduler that walks
@@ -457,7 +460,7 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
     those out of view when objects come into view; then kept, the records' masks following
     the view), and a frame that drops the lists (objects moved)."""
     p, lights, objects, cams = _city_pair(ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1),
-                                          4, 0.05, 0.0)
+                                          4, 0.05, 0.0, tuning)
     rng = np.random.default_rng(4)
     local = np.flatnonzero(lights["type"] != 2)
     some = rng.choice(local, 40, replace=False)
@@ -531,7 +534,7 @@ def test_candidate_lists_give_the_pairs_of_a_walk_of_every_light(grid_kind):
 
 @pytest.mark.parametrize("unshadowed", ["light", "skip"])
 def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_kind,
-                                                                          unshadowed):
+                                                                          unshadowed, tuning):
     """Incremental frames whose lights change under a still camera take the pairs of the
     objects in the changed lights' candidate lists (before and after the lists change, and
     of lights whose shadow map or "skip" status changed) from those lists, and recompute
@@ -542,7 +545,7 @@ def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_
     back, and a cut."""
     cfg = ls.Config(max_lights=4, fade_in=0.1, fade_out=0.1, shadow_budget=3,
                     unshadowed=unshadowed)
-    p, lights, objects, cams = _city_pair(cfg, 7, 0.1, 0.8)
+    p, lights, objects, cams = _city_pair(cfg, 7, 0.1, 0.8, tuning)
     rng = np.random.default_rng(7)
     local = np.flatnonzero(lights["type"] != 2)
     some = rng.choice(local, 60, replace=False)
@@ -607,7 +610,7 @@ def test_incremental_frames_pair_the_changed_lights_objects_from_the_lists(grid_
 
 
 @pytest.mark.parametrize("in_slots", [True, False])
-def test_a_light_that_turns_directional_leaves_the_candidate_lists(grid_kind, in_slots):
+def test_a_light_that_turns_directional_leaves_the_candidate_lists(grid_kind, in_slots, tuning):
     """A point light that turns directional is dropped from the objects' candidate lists
     it was in, and a directional light that turns point joins them. The thesis model makes
     each camera move a full frame, which takes its pairs from the kept lists. (Found by
@@ -615,7 +618,7 @@ def test_a_light_that_turns_directional_leaves_the_candidate_lists(grid_kind, in
     candidate_pairs paired it twice with each object, once from its list and once as a
     directional light: a repeated light in a row and garbage fade states.)"""
     t = Twin(ls.Config(max_lights=3, model="thesis", fade_in=0.0, fade_out=0.0,
-                       directional_in_slots=in_slots))
+                       directional_in_slots=in_slots), tuning=tuning)
     n_l = 6
     t.set_lights(id=np.arange(n_l), type=np.zeros(n_l, np.int64),
                  position=np.array([[1.0, 0.0, 15.0]] + [[0.0, 0.0, 15.0]] * (n_l - 1)),
@@ -643,13 +646,13 @@ def test_a_light_that_turns_directional_leaves_the_candidate_lists(grid_kind, in
                      else [""] * 6), plans
 
 
-def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
+def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind, tuning):
     """Every light moving makes a full frame; with the objects and cameras as they were,
     it keeps their visibility and grid (same bits as a frame that builds them) until the
-    lights' radii change the cell edge (1.5x: beyond CELL_SLACK), or, for a grid of the
+    lights' radii change the cell edge (1.5x: beyond Tuning.cell_slack), or, for a grid of the
     visible objects only, the camera moves; a grid of every object follows the camera by
     its records' masks."""
-    p = _Pair(ls.Config(max_lights=4))
+    p = _Pair(ls.Config(max_lights=4), tuning)
     scene = city(3_000, 300, seed=3, shadow_fraction=0.05)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
     p.set_lights(**lights)
@@ -673,7 +676,7 @@ def test_a_full_frame_keeps_the_grid_of_objects_that_did_not_move(grid_kind):
     assert plans == [False, True, True, False, True, camera_keeps, True], plans
 
 
-def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_kind):
+def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_kind, tuning):
     """Two lights over two apart groups of objects. The first frame makes no candidate
     lists (it walks the lights); in the next, one light leaves the view: its objects lose
     it, though lists made in that frame would not name them (the light is in none). That
@@ -687,7 +690,7 @@ def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_k
     lights = dict(id=np.array([4, 9]), type=np.zeros(2, np.uint8), radius=np.full(2, 9.0),
                   position=np.array([[-20.0, 0, 40], [20.0, 0, 40]]))
     cfg = ls.Config(max_lights=2, fade_in=0.0, fade_out=0.0)
-    t, p = Twin(cfg), _Pair(cfg)
+    t, p = Twin(cfg, tuning=tuning), _Pair(cfg, tuning)
     cam = [ls.Camera(position=np.zeros(3), forward=np.array([0.0, 0, 1]),
                      up=np.array([0.0, 1, 0]), fov_y=1.2, aspect=1.0, near=0.5, far=200.0)]
     plans = []
@@ -713,23 +716,41 @@ def test_a_light_leaving_before_there_are_candidate_lists_leaves_no_pairs(grid_k
 class _NoPairRoom(ls.Scheduler):
     """Sizes the pair heap of a full frame from the candidate lists at nothing, as if the
     lights' lists undercounted the objects': candidate_pairs then writes nothing and
-    reports the room it needs."""
+    reports the room it needs (_ShortHeaps)."""
 
     short = 0  # full frames whose heap was sized here
 
-    def _pair_room(self, cands: Any, n: int, n_dir: int) -> int:
-        type(self).short += 1
-        return 0
+    def __init__(self, config: ls.Config, tuning: Tuning) -> None:
+        super().__init__(config, tuning)
+        self._buffers = _ShortHeaps()
 
 
-def test_a_full_frame_whose_pair_heap_is_short_takes_the_room_it_needs(grid_kind):
+class _ShortHeaps(Buffers):
+    """Buffers whose first heap of each pair cache made from the candidate lists
+    (pair_cache._from_candidates, which asks for the room the lights' lists give, then,
+    when that falls short, for the room candidate_pairs reports) has room for nothing."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._shorted = False
+
+    def new_heap(self, room: int) -> tuple[np.ndarray, np.ndarray]:
+        if sys._getframe(1).f_code.co_name == "_from_candidates":
+            self._shorted = not self._shorted
+            if self._shorted:
+                _NoPairRoom.short += 1
+                room = 0
+        return super().new_heap(room)
+
+
+def test_a_full_frame_whose_pair_heap_is_short_takes_the_room_it_needs(grid_kind, tuning):
     """A full frame from the candidate lists whose heap is short of its pairs pairs again
     into a heap of the room candidate_pairs reports: every frame (every light moving, the
     sun among them) is that of a scheduler whose heaps fit, and the pair count is the
     cache's."""
     scene = city(6_000, 600, seed=4, shadow_fraction=0.02, sun_shadows=True)
     cfg = ls.Config(max_lights=6, shadow_budget=3)
-    a, b = _NoPairRoom(cfg), ls.Scheduler(cfg)
+    a, b = _NoPairRoom(cfg, tuning), ls.Scheduler(cfg, tuning)
     for s in (a, b):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
@@ -749,13 +770,13 @@ def test_a_full_frame_whose_pair_heap_is_short_takes_the_room_it_needs(grid_kind
         assert _NoPairRoom.short == 0
 
 
-def test_the_cell_edge_is_checked_again_as_lights_leave_a_few_at_a_time(grid_kind):
+def test_the_cell_edge_is_checked_again_as_lights_leave_a_few_at_a_time(grid_kind, tuning):
     """Lights leaving the view change the competing set a little every frame: a kept grid
-    of every object has its cell edge checked against the lights again once EDGE_DRIFT of
+    of every object has its cell edge checked against the lights again once Tuning.edge_drift of
     them changed since the last check (not since last frame), so with the smaller lights
     leaving two a frame (under 1% of the city's 300 each time) the grid ends with larger
     cells; every frame as a scheduler's that makes everything anew."""
-    p = _Pair(ls.Config(max_lights=4))
+    p = _Pair(ls.Config(max_lights=4), tuning)
     scene = city(3_000, 300, seed=5)
     lights = {k: np.array(v, copy=True) for k, v in scene.lights.items()}
     p.set_lights(**lights)
@@ -771,7 +792,7 @@ def test_the_cell_edge_is_checked_again_as_lights_leave_a_few_at_a_time(grid_kin
         fa, fb = p.a.frame(cams, dt=1 / 60), p.b.frame(cams, dt=1 / 60)
         frames_identical(fa, fb, f"frame {i // 2}")
         # Two lights a frame are within the drift: not checked again every frame.
-        assert 2 <= scheduler.EDGE_DRIFT * fa.stats["counts"]["competing_lights"] or i
+        assert 2 <= p.a.tuning.edge_drift * fa.stats["counts"]["competing_lights"] or i
         edges.append(float(re.search(r"cells of ([0-9.]+) m", fa.stats["plan"]["pairs"])[1]))
     if grid_kind == "every":
         assert edges[-1] > 1.25 * edges[0], (edges[0], edges[-1])
@@ -787,7 +808,7 @@ def _turned_camera(cam: ls.Camera, angle: float) -> ls.Camera:
                      far=cam.far)
 
 
-def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
+def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind, tuning):
     """A camera turning back and forth over a city: a grid of every object is kept, and the
     objects that leave or enter the view only get their record's mask word again; the
     visibility tests its group boxes first, and from the third frame on rewrites only the
@@ -798,7 +819,7 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
     everything anew."""
     scene = city(3_000, 300, seed=8, shadow_fraction=0.1)
     cfg = ls.Config(max_lights=4, shadow_budget=8)
-    t, p = Twin(cfg), _Pair(cfg)
+    t, p = Twin(cfg, tuning=tuning), _Pair(cfg, tuning)
     for s in (t, p):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
@@ -830,14 +851,14 @@ def test_a_grid_of_every_object_follows_the_camera_by_its_masks(grid_kind):
         assert "invisible casting objects" in ff.stats["plan"]["casters"]
 
 
-def test_visibility_by_groups_starts_again_on_a_new_grid(grid_kind):
+def test_visibility_by_groups_starts_again_on_a_new_grid(grid_kind, tuning):
     """The group pass of a moving camera keeps its groups' classes (in view, out of it,
     across a plane) only while the grid's positions are the same: a frame whose lights'
     radii grow threefold (cameras and objects still) builds a new grid of every object,
     and the next turn of the camera tests every group as in a first pass. Frames equal
     the oracle's."""
     scene = city(3_000, 300, seed=8)
-    t = Twin(ls.Config(max_lights=4))
+    t = Twin(ls.Config(max_lights=4), tuning=tuning)
     t.set_lights(**scene.lights)
     t.set_objects(**scene.objects)
     since, kept = [], []
@@ -856,11 +877,11 @@ def test_visibility_by_groups_starts_again_on_a_new_grid(grid_kind):
 
 @pytest.mark.parametrize("single", [False, True], ids=["float64", "float32"])
 def test_an_out_of_view_objects_mask_word_meets_only_the_walk_for_a_moving_camera(single):
-    """scheduler._shown_mask, as visible_objects writes it into a record: the word of an
+    """grid.shown_mask, as visible_objects writes it into a record: the word of an
     object in view meets a light's mask (uint32) as the object's mask does, and its SHOWN
     bits are that mask; an object out of view meets no light's mask and has no SHOWN bit.
     In float64 records it keeps its mask in the upper half, which the walk's mask of every
-    bit (-1.0, pairs.widen_walkers) meets; in float32 records it is 0, and the walk's mask
+    bit (-1.0, candidates.widen_walkers) meets; in float32 records it is 0, and the walk's mask
     (float(SHOWN)) meets the objects in view only."""
     rng = np.random.default_rng(17)
     edge = np.array([0, 1, 6, 0x80000000, 0x80000001, 0xFFFFFFFF], np.uint32)
@@ -871,7 +892,7 @@ def test_an_out_of_view_objects_mask_word_meets_only_the_walk_for_a_moving_camer
     recs = np.zeros((n, 8), np.float32 if single else np.float64)
     bits = recs.view(np.uint32 if single else np.uint64)
     lo = rng.uniform(-5, 5, (n, 3))
-    visible_objects(lo, lo + 1.0, scheduler._shown_mask(shown, mask, single), np.arange(n), n,
+    visible_objects(lo, lo + 1.0, shown_mask(shown, mask, single), np.arange(n), n,
                     (recs, bits), np.zeros(3))
     word = bits[:, 6].astype(np.uint64)
     assert np.array_equal(word & np.uint64(SHOWN), np.where(shown, mask, 0))
@@ -882,9 +903,9 @@ def test_an_out_of_view_objects_mask_word_meets_only_the_walk_for_a_moving_camer
 
 
 @pytest.mark.parametrize("precision", ["exact", "fast"])
-def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, precision):
+def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, precision, tuning):
     """Objects that move a little keep their place in a grid of every object, their records
-    rewritten (pairs.move_records), while each box stays inside its cell's slab widened by
+    rewritten (grid.move_records), while each box stays inside its cell's slab widened by
     the grid's largest half-extent; a box that leaves it, or one moved past the grid's
     edge, makes the grid again. With the cameras still, only the moved objects are tested
     for visibility and against the sun's cascade sweeps. Every frame equals a full frame's,
@@ -892,7 +913,7 @@ def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, p
     bound)."""
     scene = city(3_000, 300, seed=6, shadow_fraction=0.1, sun_shadows=True)
     cfg = ls.Config(max_lights=4, shadow_budget=8, precision=precision)
-    t, p = Twin(cfg), _Pair(cfg)
+    t, p = Twin(cfg, tuning=tuning), _Pair(cfg, tuning)
     objects = {k: np.array(v, copy=True) for k, v in scene.objects.items()}
     for s in (t, p):
         s.set_lights(**scene.lights)
@@ -928,11 +949,11 @@ def test_moved_objects_keep_their_records_in_a_grid_of_every_object(grid_kind, p
         assert not any(kept), kept
 
 
-def test_a_new_grid_writes_its_records_over_the_last_ones():
+def test_a_new_grid_writes_its_records_over_the_last_ones(tuning):
     """With the camera and a few objects moving every frame the grid is built again each
     frame, into one kept buffer (a fresh one per frame was mapped and faulted in again at
     1M objects), and the frames stay those of a scheduler that builds everything anew."""
-    p = _Pair(ls.Config(max_lights=4))
+    p = _Pair(ls.Config(max_lights=4), tuning)
     scene = city(3_000, 300, seed=6, shadow_fraction=0.05)
     p.set_lights(**scene.lights)
     p.set_objects(**scene.objects)
@@ -945,20 +966,20 @@ def test_a_new_grid_writes_its_records_over_the_last_ones():
         p.update_objects(id=some, bounds_min=lo + 0.1 * (i + 1), bounds_max=hi + 0.1 * (i + 1))
         fa, fb = p.a.frame([cam], dt=1 / 60), p.b.frame([cam], dt=1 / 60)
         frames_identical(fa, fb, f"frame {i}")
-        grids.append(p.a._cache.grid)
-        addresses.append(p.a._cache.grid.vis[0].__array_interface__["data"][0])
+        grids.append(p.a._last.grid)
+        addresses.append(p.a._last.grid.records[0].__array_interface__["data"][0])
     assert all(a is not b for a, b in zip(grids, grids[1:], strict=False)), "grid kept"
     # The first buffer, and at most one more if the visible set outgrew it.
     assert len(set(addresses)) <= 2, addresses
 
 
-def test_pair_heaps_take_turns():
+def test_pair_heaps_take_turns(tuning):
     """A frame that makes every pair list anew (every light moving: from the candidate
     lists, or grouped from the grid's walk) writes them into the heap the last such frame
     replaced, and so does one that packs the cache (a tenth of the lights moving, frame
     after frame), instead of a new heap each time (mapped and faulted in again at 1M
     objects); every frame stays that of a scheduler that builds everything anew."""
-    p = _Pair(ls.Config(max_lights=4, fade_in=0.05, fade_out=0.05))
+    p = _Pair(ls.Config(max_lights=4, fade_in=0.05, fade_out=0.05), tuning)
     scene = city(3_000, 300, seed=8, shadow_fraction=0.05)
     p.set_lights(**scene.lights)
     p.set_objects(**scene.objects)
@@ -974,8 +995,8 @@ def test_pair_heaps_take_turns():
             fa, fb = p.a.frame(scene.cameras, dt=1 / 60), p.b.frame(scene.cameras, dt=1 / 60)
             frames_identical(fa, fb, f"frame {i}")
             plans.add(fa.stats["plan"]["lists"].split(";")[0])
-            if t >= 3 and all(h is not p.a._cache.heap[0] for h in heaps):
-                heaps.append(p.a._cache.heap[0])
+            if t >= 3 and all(h is not p.a._last.cache.heap[0] for h in heaps):
+                heaps.append(p.a._last.cache.heap[0])
             i += 1
         assert len(heaps) == 2, (i, [h.size for h in heaps])
     # (With a grid of the visible objects only, every light moving is a full frame.)
@@ -984,13 +1005,13 @@ def test_pair_heaps_take_turns():
         "grouped by object (every pair new)"}, plans
 
 
-def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
+def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back(tuning):
     """Output arrays of the frame before the last are written again only when nothing
     outside the scheduler holds them: frames a caller keeps stay as returned; frames it
     drops give their buffers back, with the same results."""
     scene = city(3_000, 300, seed=2, shadow_fraction=0.05)
     cfg = ls.Config(max_lights=4, fade_in=0.05, fade_out=0.05)
-    kept_s, dropped_s = ls.Scheduler(cfg), ls.Scheduler(cfg)
+    kept_s, dropped_s = ls.Scheduler(cfg, tuning), ls.Scheduler(cfg, tuning)
     for s in (kept_s, dropped_s):
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
@@ -1019,12 +1040,10 @@ def test_kept_frames_never_change_and_dropped_ones_give_their_memory_back():
     assert len(set(addresses[2:])) <= 2, addresses
 
 
-def test_a_frame_that_stops_half_way_leaves_no_cache_behind(monkeypatch):
+def test_a_frame_that_stops_half_way_leaves_no_cache_behind(monkeypatch, tuning):
     """The cache's lists are changed in place by an incremental frame; if it raises, the
     next frame is full and right."""
-    import lightsched.scheduler as sched
-
-    t, lights, _, cams = _twin(ls.Config(max_lights=3))
+    t, lights, _, cams = _twin(ls.Config(max_lights=3), tuning)
     t.frame(cams)
     lights["position"][:30] += 1.0
     t.update_lights(id=lights["id"][:30], position=lights["position"][:30])
@@ -1032,10 +1051,12 @@ def test_a_frame_that_stops_half_way_leaves_no_cache_behind(monkeypatch):
     def boom(*args: Any) -> None:
         raise RuntimeError("stopped half way")
 
-    monkeypatch.setattr(sched, "object_pass", boom)
+    # (select_and_fade calls the kernel by its name in lightsched.objects.)
+    monkeypatch.setattr(lightsched.objects, "object_pass", boom)
     with pytest.raises(RuntimeError):
         t.fast.frame(cams)
     monkeypatch.undo()
+    assert t.fast._last is None
     f, _ = t.frame(cams)
     assert _plan(f) == "full: the last frame stopped half way", f.stats["plan"]
 

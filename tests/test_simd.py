@@ -1,10 +1,10 @@
 """simd.point_run then simd.point_priority (a point light's run of records in vector code)
 == the scalar rule they replace (priority.box_d2, the mask, priority.falloff + p_user: the
-point light's branch of pairs._exact_pair), bit for bit, on generated records and runs;
+point light's branch of walk._exact_pair), bit for bit, on generated records and runs;
 point_run alone == the range test and the mask (the hits' positions and d2, which the
 light pass finishes for other lights); simd.spot_priority == the spot branch;
 simd.candidate_run (one object against its candidate point and spot lights) == the scalar
-loop of pairs.candidate_pairs, and so does candidate_pairs' stream of every object's
+loop of candidates.candidate_pairs, and so does candidate_pairs' stream of every object's
 candidates (simd.stream_fill, stream_run, stream_spots, stream_pack). With both ways of
 packing the lanes (an AVX-512 register where the target has it, the portable compress
 store), and without a store past the pairs they append."""
@@ -21,18 +21,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.jit import PRANGE_ONLY
-from lightsched.pairs import (
-    OBJECT_CHUNK,
-    _finish_hits,
-    candidate_pairs,
-    live_ids,
-    object_pass,
-    visible_objects,
-)
-from lightsched.pairs import scalar_candidates as pairs_scalar
+from lightsched.candidates import candidate_pairs
+from lightsched.candidates import scalar_candidates as pairs_scalar
+from lightsched.grid import visible_objects
+from lightsched.jit import OBJECT_CHUNK, PRANGE_ONLY
+from lightsched.objects import live_ids, object_pass
 from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
 from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
+from lightsched.walk import _finish_hits
 
 finite = {"allow_nan": False, "allow_infinity": False}
 SENTINEL_ROW = -7
@@ -41,7 +37,7 @@ SENTINEL_P = -123.0
 
 @nb.njit(nogil=True, error_model="numpy")
 def scalar_run(box, bits, rows, v0, v1, light, out_obj, out_p, n):
-    """The scalar rule, record by record, as pairs._exact_pair applies it to a point light
+    """The scalar rule, record by record, as walk._exact_pair applies it to a point light
     under the contribution model."""
     x, y, z, r, mask, intensity, p_user = light
     lm = np.int64(mask)
@@ -115,7 +111,7 @@ HELD_KINDS = ("held", "reordered", "outranked", "fading", "other", "reset", "hid
 
 
 def held_case(rng, kinds, n_l, max_shadowed, ties, fade_in=0.2):
-    """pairs.object_pass's arguments (K = 8) for one object of each kind: "held" (last
+    """objects.object_pass's arguments (K = 8) for one object of each kind: "held" (last
     frame's slots all on, holding its competing lights in output order under this frame's
     P), "reordered" (the same with two neighbouring slots swapped), "outranked" (held, but
     by the last K of its lights by P: others may rank first even against their
@@ -151,7 +147,7 @@ def held_case(rng, kinds, n_l, max_shadowed, ties, fade_in=0.2):
 
 
 def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0.2):
-    """pairs.object_pass's arguments (K = 8) for objects = [(kind, P and light rows of
+    """objects.object_pass's arguments (K = 8) for objects = [(kind, P and light rows of
     its pairs, last frame's slot ids and states, last frame's selection)] (kinds "reset"
     and "hidden" as held_case's), with a few pairs of no object between them; slots not
     on have weights of a few values (ties, one a step short of 1 within 1e-6) or any."""
@@ -302,7 +298,7 @@ def test_point_run_equals_the_scalar_rule(case, start):
 
 @nb.njit(nogil=True, error_model="numpy")
 def scalar_spot(box, rows, hot, lf, out_obj, out_p, n0, n1):
-    """The scalar rule on point_run's hits of spot row 0: pairs._finish_hits (the cone,
+    """The scalar rule on point_run's hits of spot row 0: walk._finish_hits (the cone,
     then P) under the contribution model."""
     return _finish_hits(hot, lf, 0, SPOT, n0, n1, box, rows, out_obj, out_p,
                         MODEL_CONTRIBUTION, 0.0, 0.0)
@@ -423,7 +419,7 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
 
 @nb.njit(nogil=True, error_model="numpy")
 def scalar_candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
-    """pairs.scalar_candidates (candidate_pairs' scalar loop) for one object under the
+    """candidates.scalar_candidates (candidate_pairs' scalar loop) for one object under the
     contribution model, with candidate_run's arguments."""
     return pairs_scalar(box, np.int64(box.view(np.int64)[o, 6]), o, (hot, lf), compete, c_j,
                         a, b, (out_p, out_j), m, np.array([MODEL_CONTRIBUTION, 0.0, 0.0]))
@@ -553,7 +549,7 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
     record, its mask 0 or, in float64 records, in the upper half; some of zero extent, some
     large) and n_l point and spot lights round them, each object
     with a list of 0..24 distinct lights in a room with garbage after it, as
-    scheduler._Candidates keeps them."""
+    candidates.Candidates keeps them."""
     centre = rng.normal(size=(n, 3)) * 15.0
     half = rng.choice([0.0, 0.5, 2.0, 12.0], size=(n, 1)) * rng.uniform(0, 1, (n, 3))
     masks = rng.choice(np.array([0xFFFFFFFF, 1, 2, 0], np.uint32), n, p=[0.6, 0.15, 0.15, 0.1])
@@ -723,7 +719,7 @@ HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mm
 WITHOUT_AVX512 = """
 import numpy as np
 import lightsched.simd as simd
-from lightsched.pairs import visible_objects
+from lightsched.grid import visible_objects
 from test_simd import CANDIDATES, KERNELS, scalar_candidates, scalar_run
 assert not simd.PACK_IN_REGISTER and list(KERNELS) == [False]
 assert "zmm" not in "".join(KERNELS[False].inspect_asm().values())

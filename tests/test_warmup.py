@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 import lightsched as ls
-from lightsched import scheduler
 from lightsched.frame import PER_OBJECT, changed_rows
 from lightsched.scenes import city, dungeon22, large_world, move_lights, split_screen, stadium
+from lightsched.tuning import Tuning
 from lightsched.warmup import GENERIC_K, WarmUp, kernels, warm_up
 
 CONFIGS = [
@@ -33,6 +33,9 @@ CONFIGS = [
     ls.Config(shadow_budget=1, cascades=1, fade_in=0.0, fade_out=0.0),
 ]
 
+# The scenes are small: the candidate lists' path is opened to them.
+TUNING = Tuning(candidate_min_objects=0)
+
 
 def _scenes() -> list[ls.scenes.CityScene]:
     return [city(1500, 150, seed=3, shadow_fraction=0.2, sun_shadows=True),
@@ -44,7 +47,7 @@ def _scenes() -> list[ls.scenes.CityScene]:
 def _sequence(config: ls.Config, sc: ls.scenes.CityScene) -> None:
     """A scene through moves of every kind, property changes, removals, additions, cuts, a
     camera that sees little and one that sees nothing."""
-    s = ls.Scheduler(config)
+    s = ls.Scheduler(config, TUNING)
     lights, objects = sc.lights, sc.objects
     s.set_lights(**lights)
     s.set_objects(**objects)
@@ -74,7 +77,7 @@ def _sequence(config: ls.Config, sc: ls.scenes.CityScene) -> None:
     s.set_lights(**{k: v[: len(ids) // 2] for k, v in lights.items()})
     s.frame(cams, dt=1 / 60)
     s.frame(cams, dt=0.0)
-    ls.schedule(lights, objects, cams, config)
+    ls.schedule(lights, objects, cams, config, TUNING)
 
 
 def _other_dtypes(sc: ls.scenes.CityScene) -> ls.scenes.CityScene:
@@ -88,15 +91,14 @@ def _other_dtypes(sc: ls.scenes.CityScene) -> ls.scenes.CityScene:
 
 def _battery() -> dict[str, int]:
     """Runs warm_up, then every config on every scene; the kernels that gained signatures.
-    The scenes are small: the candidate lists' path is opened to them."""
+    The scenes are small: the candidate lists' path is opened to them (TUNING)."""
     warm_up()
-    scheduler.CANDIDATE_MIN_OBJECTS = 0
     before = {name: len(d.signatures) for name, d in kernels().items()}
     for config in CONFIGS:
         for sc in _scenes():
             _sequence(config, sc)
         _sequence(config, _other_dtypes(city(900, 90, seed=5, shadow_fraction=0.2)))
-        empty = ls.Scheduler(config)
+        empty = ls.Scheduler(config, TUNING)
         empty.frame(city(10, 3).cameras)
     return {name: len(d.signatures) - before.get(name, 0) for name, d in kernels().items()
             if len(d.signatures) != before.get(name, 0)}
@@ -115,7 +117,7 @@ def test_warm_up_twice_loads_nothing_the_second_time():
     again = warm_up(max_lights=(8,), precisions=("exact",))
     assert isinstance(again, WarmUp) and again.seconds > 0
     assert (again.loaded, again.compiled) == (0, 0)
-    assert "lightsched.pairs.object_pass" in kernels()
+    assert "lightsched.objects.object_pass" in kernels()
 
 
 if __name__ == "__main__":

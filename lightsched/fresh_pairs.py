@@ -1,0 +1,284 @@
+"""Pairs of the objects an incremental frame moves or brings into view, each against
+every competing light (DESIGN section 6: only the objects that moved are recomputed):
+tested against all of them (``direct_pairs``) when they are few, else against those of the
+cells its box overlaps in a grid of the point and spot lights (``light_grid``,
+``grid_pairs``), kept while no light changes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numba as nb
+import numpy as np
+
+from .candidates import candidate_pairs, scalar_candidates
+from .grid import _axis_cells, _cell, visible_objects
+from .jit import PRANGE_ONLY
+from .priority import MODEL_CONTRIBUTION
+from .simd import SHOWN, candidate_run
+
+if TYPE_CHECKING:
+    from .priority import Packed
+    from .scene import ObjectStore
+
+LIGHT_GRID_CELLS = 4         # cells per light in the grid of the lights, at most
+LIGHT_GRID_BIG = 64          # a light over more cells is tested by every object
+FRESH_CHUNK = 512            # objects per parallel work item of grid_pairs
+
+
+def fresh_object_pairs(rows: np.ndarray, objects: ObjectStore, packed: Packed,
+                       params: np.ndarray, frame: tuple[np.ndarray, bool],
+                       cells: tuple | None) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The pairs of the object ``rows`` (ascending) with every competing light, each object
+    tested against all of them (direct_pairs) or, given a grid of the lights ``cells``,
+    against those of the cells its box overlaps (grid_pairs), as (start [N + 1], (P,
+    light row)) grouped by object row: valid at ``rows`` and the row after each, which is
+    all that pair_cache.replace_lists reads of them. frame = (origin, single) of the
+    records."""
+    recs = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
+    bits = recs.view(np.uint32 if frame[1] else np.uint64)
+    visible_objects(objects.bounds_min, objects.bounds_max, objects.mask, rows, rows.size,
+                    (recs, bits), frame[0])
+    compete, is_dir = packed.compete, packed.is_dir
+    dir_rows = np.flatnonzero(compete & is_dir)
+    if cells is not None:
+        return grid_pairs(rows, (recs, bits), packed.rows, compete, cells, dir_rows, params,
+                          len(objects))
+    point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
+    return direct_pairs(rows, (recs, bits), packed.rows, compete, point_rows, dir_rows,
+                        params, len(objects))
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _vector_rows(params, box, lights):
+    """Whether simd.candidate_run takes these pairs: the contribution model and whole
+    8-word rows of records and lights, which it reads."""
+    return (int(params[0]) == MODEL_CONTRIBUTION and box.shape[1] == 8
+            and lights[0].shape[1] == 8 and lights[1].shape[1] == 8)
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params, vector):
+    """The pairs of record o of recs = (boxes, integer view) with the candidate light rows
+    c_j[a:b] (cands = (c_j, a, b)) and the directional ``dir_rows``, appended from m to
+    (o_p, o_j); returns the new end. ``vector``: the records and light rows are 8-word
+    float64 rows under the contribution model, which simd.candidate_run takes eight
+    candidates at a time. candidate_pairs keeps its own copy of these lines: calling this
+    from its parallel loop, a full (100k, 10k) frame's candidates' pass took ~1.3 ms more
+    (paired, twice), though not on captured inputs."""
+    box, bits = recs
+    hot, lf = lights
+    c_j, a, b = cands
+    ob = np.int64(bits[o, 6]) & SHOWN
+    # An object out of view (no SHOWN bit in its record) keeps its list but pairs with none.
+    if ob == 0:
+        b = a
+    if vector and b > a:
+        # Float64 records: eight candidates a step in vector code (-1: float32).
+        end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m)
+        if end >= 0:
+            a = b
+            m = end
+    m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, (o_p, o_j), m, params)
+    for d in range(dir_rows.shape[0]):
+        j = dir_rows[d]
+        if ob & np.int64(hot[j, 4]) != 0:
+            o_p[m] = hot[j, 6] + hot[j, 7]
+            o_j[m] = j
+            m += 1
+    return m
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def direct_pairs(rows, recs, lights, compete, point_rows, dir_rows, params, n):
+    """The pairs of a few objects that came into view, each tested against every competing
+    light (candidate_pairs' rule with every point and spot light ``point_rows`` a
+    candidate): one object a step on the calling thread, no grid. An incremental frame with
+    a camera move brings a handful of objects into view; a grid of them walked by every
+    light took ~1.1 ms at (100k, 10k) for one object (the grid's O(N) pass over the rows,
+    10k lights' cell ranges and runs). rows = object rows ascending, recs = their records
+    in that order; lights, compete, params as candidate_pairs. Returns (start [n + 1],
+    (P, light row)): object rows[r]'s pairs at start[rows[r]]..start[rows[r] + 1], the
+    only entries of start written."""
+    vector = _vector_rows(params, recs[0], lights)
+    room = rows.shape[0] * (point_rows.shape[0] + dir_rows.shape[0])
+    o_p = np.empty(room)
+    o_j = np.empty(room, np.int32)
+    start = np.empty(n + 1, np.int64)
+    m = 0
+    for r in range(rows.shape[0]):
+        start[rows[r]] = m
+        m = _record_pairs(r, recs, lights, compete, (point_rows, 0, point_rows.shape[0]),
+                          dir_rows, o_p, o_j, m, params, vector)
+        start[rows[r] + 1] = m
+    return start, (o_p[:m], o_j[:m])
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def light_grid(hot, rows):
+    """The spheres of the point and spot light ``rows`` of light_hot sorted into a grid of
+    cubic cells: (g_f [6] (origin, 1/edge per axis as grid_shape), dims [3], cell_start
+    [C + 1], the light rows of each cell int32, the rows over LIGHT_GRID_BIG cells int32,
+    which every object tests). The edge is twice the median radius (of at most 1024 of
+    them, evenly spaced), so a light spans ~2 cells an axis, made larger until there are
+    at most LIGHT_GRID_CELLS cells per light. A sphere's cell range is widened as
+    _axis_cells widens it, so rounding never drops a light the exact test keeps.
+
+    At (100k, 10k) the grid takes ~0.9 ms to make (31 x 5 x 31 cells of 35 m, ~19 lights
+    a cell) and grid_pairs ~0.4 ms for 981 moved objects; with an edge of 1.5, 1 and 0.5
+    median radii 0.34, 2.4 and 8.1 ms (the city's larger objects then span many cells),
+    with 3 radii 0.52 ms (measured on captured inputs, 2 threads)."""
+    n = rows.shape[0]
+    g_f = np.zeros(6)
+    dims = np.ones(3, np.int64)
+    if n == 0:
+        return g_f, dims, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    radii = np.empty(n)
+    for t in range(n):
+        j = rows[t]
+        radii[t] = hot[j, 3]
+        for a in range(3):
+            lo[a] = min(lo[a], hot[j, a] - hot[j, 3])
+            hi[a] = max(hi[a], hot[j, a] + hot[j, 3])
+    edge = max(2.0 * np.median(radii[::max(1, n // 1024)]), 1e-300)
+    for a in range(3):
+        edge = max(edge, (hi[a] - lo[a]) / (1 << 20))
+    while True:
+        cells = 1
+        for a in range(3):
+            dims[a] = max(1, min(1 << 20, int(math.ceil((hi[a] - lo[a]) / edge))))
+            cells *= dims[a]
+        if cells <= LIGHT_GRID_CELLS * n + 64:
+            break
+        edge *= 1.25
+    for a in range(3):
+        g_f[a] = lo[a]
+        g_f[3 + a] = 1.0 / edge
+    ranges = np.empty((n, 6), np.int64)
+    count = np.zeros(cells + 1, np.int64)
+    n_big = 0
+    for t in range(n):
+        j = rows[t]
+        x0, x1, _ = _axis_cells(hot[j, 0], hot[j, 3], g_f[0], g_f[3], dims[0])
+        y0, y1, _ = _axis_cells(hot[j, 1], hot[j, 3], g_f[1], g_f[4], dims[1])
+        z0, z1, _ = _axis_cells(hot[j, 2], hot[j, 3], g_f[2], g_f[5], dims[2])
+        ranges[t] = (x0, y0, z0, x1, y1, z1)
+        if (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) > LIGHT_GRID_BIG:
+            n_big += 1
+            continue
+        for x in range(x0, x1 + 1):
+            for y in range(y0, y1 + 1):
+                for z in range(z0, z1 + 1):
+                    count[(x * dims[1] + y) * dims[2] + z + 1] += 1
+    for c in range(cells):
+        count[c + 1] += count[c]
+    at = count[:-1].copy()
+    cell_rows = np.empty(count[cells], np.int32)
+    big = np.empty(n_big, np.int32)
+    n_big = 0
+    for t in range(n):
+        x0, y0, z0, x1, y1, z1 = ranges[t]
+        if (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) > LIGHT_GRID_BIG:
+            big[n_big] = rows[t]
+            n_big += 1
+            continue
+        for x in range(x0, x1 + 1):
+            for y in range(y0, y1 + 1):
+                for z in range(z0, z1 + 1):
+                    c = (x * dims[1] + y) * dims[2] + z
+                    cell_rows[at[c]] = rows[t]
+                    at[c] += 1
+    return g_f, dims, count, cell_rows, big
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _box_cells(box, r, g_f, dims):
+    """The cells (x0, y0, z0, x1, y1, z1) of a grid of lights (light_grid) that record r's
+    box overlaps."""
+    return (_cell(box[r, 0], g_f[0], g_f[3], dims[0]), _cell(box[r, 1], g_f[1], g_f[4], dims[1]),
+            _cell(box[r, 2], g_f[2], g_f[5], dims[2]), _cell(box[r, 3], g_f[0], g_f[3], dims[0]),
+            _cell(box[r, 4], g_f[1], g_f[4], dims[1]), _cell(box[r, 5], g_f[2], g_f[5], dims[2]))
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _grid_candidates(r, box, lgrid, seen, out, m):
+    """The candidate light rows of record r of ``box`` in a grid of lights (light_grid):
+    the big lights, then those of the cells its box overlaps, each once (``seen``: the last
+    record that took each light row), written from m into ``out``; returns the new end."""
+    g_f, dims, cell_start, cell_rows, big = lgrid
+    for j in big:
+        out[m] = j
+        m += 1
+    x0, y0, z0, x1, y1, z1 = _box_cells(box, r, g_f, dims)
+    for x in range(x0, x1 + 1):
+        for y in range(y0, y1 + 1):
+            base = (x * dims[1] + y) * dims[2]
+            for t in range(cell_start[base + z0], cell_start[base + z1 + 1]):
+                j = cell_rows[t]
+                if seen[j] != r:
+                    seen[j] = r
+                    out[m] = j
+                    m += 1
+    return m
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _grid_bound(r, box, lgrid):
+    """At least the number of _grid_candidates of record r: the big lights and every entry
+    of the cells its box overlaps (a light in several of them counted each time), from the
+    cells' starts alone."""
+    g_f, dims, cell_start, _, big = lgrid
+    x0, y0, z0, x1, y1, z1 = _box_cells(box, r, g_f, dims)
+    m = big.shape[0]
+    for x in range(x0, x1 + 1):
+        for y in range(y0, y1 + 1):
+            base = (x * dims[1] + y) * dims[2]
+            m += cell_start[base + z1 + 1] - cell_start[base + z0]
+    return m
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
+    """direct_pairs with each object's candidates from a grid of the point and spot lights
+    (light_grid): the lights of the cells its box overlaps, and the big ones. The same
+    pairs, in another order within an object. The candidates are listed in parallel over
+    blocks of FRESH_CHUNK objects, each into a room sized from the cells' starts
+    (_grid_bound), tested by candidate_pairs (its stream: a moved object has ~40
+    candidates here, and one object at a time took ~330 ns an object at (100k, 10k) with
+    10% of the objects moving), and the pairs packed in object order."""
+    n_l = lights[0].shape[0]
+    f = rows.shape[0]
+    n_chunks = (f + FRESH_CHUNK - 1) // FRESH_CHUNK
+    c_seg = np.zeros((f, 2), np.int64)
+    box = recs[0]
+    for r in nb.prange(f):
+        c_seg[r, 1] = _grid_bound(r, box, lgrid)
+    total = 0
+    for r in range(f):
+        c_seg[r, 0] = total
+        total += c_seg[r, 1]
+    c_j = np.empty(total, np.int32)
+    for ch in nb.prange(n_chunks):
+        seen = np.full(n_l, -1, np.int32)
+        for r in range(ch * FRESH_CHUNK, min(f, (ch + 1) * FRESH_CHUNK)):
+            c_seg[r, 1] = _grid_candidates(r, box, lgrid, seen, c_j, c_seg[r, 0]) - c_seg[r, 0]
+    room = total + f * dir_rows.shape[0]
+    seg = np.empty((f, 2), np.int64)
+    o_p = np.empty(room)
+    o_j = np.empty(room, np.int32)
+    candidate_pairs(np.arange(f), (c_seg, c_j), recs, lights, compete, dir_rows, params,
+                    (seg, o_p, o_j), 0)
+    start = np.empty(n + 1, np.int64)
+    m = 0
+    for r in range(f):
+        start[rows[r]] = m
+        for t in range(seg[r, 0], seg[r, 0] + seg[r, 1]):
+            o_p[m] = o_p[t]
+            o_j[m] = o_j[t]
+            m += 1
+        start[rows[r] + 1] = m
+    return start, (o_p[:m], o_j[:m])

@@ -1,0 +1,357 @@
+"""The object pass (DESIGN section 2, "Selection", "Fade", slot_shadow): per object, its
+cached pairs in, top-K with hysteresis (select.py), the fade machine (fade.py) and the
+shadowed slots (shadows.pick_slot_shadows), outputs out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numba as nb
+import numpy as np
+
+from .buffers import Buffers, SpareOutputs, read_only_view
+from .fade import fade_object, held_slots, steady_slots
+from .frame import PER_OBJECT, copy_rows, held_elsewhere, rows_not_in
+from .jit import OBJECT_CHUNK, PRANGE_ONLY
+from .scene import ON
+from .select import (
+    F_NEW_P,
+    F_NEW_W,
+    F_OLD_P,
+    F_OLD_W,
+    F_P,
+    F_ROWS,
+    I_ID,
+    I_NEW_ID,
+    I_NEW_ROW,
+    I_NEW_ST,
+    I_OLD_ID,
+    I_OLD_ROW,
+    I_OLD_ST,
+    I_PREV_SEL,
+    I_ROW,
+    I_ROWS,
+    hysteresis_key,
+    topk_insert,
+)
+from .shadows import pick_slot_shadows
+from .simd import LANES, held_row
+
+if TYPE_CHECKING:
+    from .pair_cache import PairCache
+    from .plan import FramePlan
+    from .scene import Config, LightStore, ObjectStore
+    from .scheduler import FrameState
+    from .shadows import ShadowSet
+
+STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
+
+
+def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """object_pass's live_id: per light row its id (int32) where ``live``, else -2 (not
+    -1, the id of an empty slot). One table, so the object pass reads one entry a pair
+    where it read the id and the live flag: held_row gathers eight lanes of it, and the
+    gather of the flags was ~5% of the pass (bench/RESULTS.md)."""
+    if out is None or out.shape != ids.shape:
+        out = np.empty(ids.shape, np.int32)
+    np.copyto(out, ids)
+    out[~live] = -2
+    return out
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _match_old_slot(p, j, lid, sf, si):
+    """Records this frame's P and row for the object's old slot of light lid, if any.
+    Compares only inside the loop (it vectorises); the one store happens after it."""
+    slot = -1
+    for m in range(sf.shape[1]):
+        slot = m if si[I_OLD_ID, m] == lid else slot
+    if slot >= 0:
+        sf[F_OLD_P, slot] = p
+        si[I_OLD_ROW, slot] = j
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _select(p, j, lid, sf, si, nbest, h, h_abs):
+    """Offers light row j (id lid) with priority p to the object's top K (select.py):
+    hysteresis key, insert, and this frame's P / row for the object's old slot of that
+    light. Returns nbest."""
+    _match_old_slot(p, j, lid, sf, si)
+    return topk_insert(sf, si, nbest, hysteresis_key(p, lid, si, h, h_abs), lid, p, j)
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static):
+    """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
+    fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
+    copied them from the last frame).
+
+    objs = (visible, reset): reset marks objects that start with their selected lights on
+    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the
+    heap, heap = (P float64 [H], light row int32 [H])): the pair cache; live_id = per light
+    row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
+    (``live_ids``; pairs of other lights are kept in the cache but do not compete); state =
+    (slot ids, slot weights f64, slot states, selected ids), each [N, K]: the ids and states
+    are last frame's light_ids and fade_state outputs, the weights and selection are updated
+    in place; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
+    count, candidates, slot_shadow int8, fading bool [N]: a slot is fading in or out);
+    params = (h, h_abs, dt/fade_in, dt/fade_out, fade_in, fade_out); shadow = (shadow map
+    index per light row or -1, max_shadowed_per_object); k_static = a tuple of K zeros if K
+    is in STATIC_K, else ().
+
+    Most objects of a scene in motion are steady: last frame's slots are all on and hold
+    exactly this frame's selection, so only P changes. They skip the fade machine (its
+    result is fade.held_slots: last frame's order, sorted again by this frame's P) and
+    read only last frame's ids and states. With K = 8 those still in last frame's order
+    (83% of a full (100k, 10k) frame's rows), and those whose slots only fade in, go
+    through simd.held_row, one vector store an output row; the rest run the code below.
+    """
+    visible, reset = objs
+    seg, (heap_p, heap_j) = lists
+    s_id, s_w, s_st, s_sel = state
+    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow, o_fading = out
+    shadow_of_row, max_shadowed = shadow
+    any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
+    h = params[0]
+    h_abs = params[1]
+    inc = params[2]
+    dec = params[3]
+    fade_in = params[4]
+    fade_out = params[5]
+    n_run = run.shape[0]
+    # A common K is a compile-time constant, the length of a tuple (its type holds it):
+    # every per-slot loop then has a known trip count, which LLVM unrolls and vectorises
+    # whole (-0.4 ms of ~6.7 at (100k, 10k), bench/RESULTS.md). Each such K costs a
+    # compilation of this kernel (~13 s, then cached), so only STATIC_K are; any other K
+    # is read from the arrays. (numba.literally would re-type every call: ~1.5 s each.)
+    k = len(k_static) if len(k_static) else s_id.shape[1]
+    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0), h,
+                  h_abs, inc, fade_in)
+    for ch in nb.prange(n_chunks):
+        sf = np.empty((F_ROWS, k))
+        si = np.empty((I_ROWS, k), np.int64)
+        for r in range(ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)):
+            o = run[r]
+            if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
+                # The common case in vector code: slots held in last frame's order.
+                cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), (live_id,), state,
+                                out, held_rules)
+                if cand >= 0:
+                    o_count[o] = min(cand, k)
+                    o_cand[o] = cand
+                    continue
+            cnt = 0
+            nbest = 0
+            cand = 0
+            if visible[o]:
+                a = seg[o, 0]
+                b = a + seg[o, 1]
+                n_old = 0
+                all_on = True
+                for m in range(k):
+                    lid = s_id[o, m]
+                    si[I_OLD_ID, m] = lid
+                    si[I_OLD_ROW, m] = -1
+                    n_old += lid >= 0
+                    all_on &= (lid < 0) | (s_st[o, m] == ON)
+                # One pass counts the competing lights and keeps them while they fit in K,
+                # the common case: then every one is selected, no keys, no ranking.
+                for t in range(a, b):
+                    j = np.int64(heap_j[t])
+                    lid = np.int64(live_id[j])
+                    if lid >= 0:
+                        if cand < k:
+                            p = heap_p[t]
+                            _match_old_slot(p, j, lid, sf, si)
+                            sf[F_P, cand] = p
+                            si[I_ID, cand] = lid
+                            si[I_ROW, cand] = j
+                        cand += 1
+                if cand <= k:
+                    nbest = cand
+                else:
+                    # (The first K old-slot matches are made again, to the same values.)
+                    for m in range(k):
+                        si[I_PREV_SEL, m] = s_sel[o, m]
+                    for t in range(a, b):
+                        j = np.int64(heap_j[t])
+                        lid = np.int64(live_id[j])
+                        if lid >= 0:
+                            nbest = _select(heap_p[t], j, lid, sf, si, nbest, h, h_abs)
+                held = False
+                if not reset[o] and all_on and n_old == nbest:
+                    # Held when every old slot holds a selected light (filled slots come
+                    # first; ids are unique, so counting them is a set comparison).
+                    matched = 0
+                    for m in range(n_old):
+                        hit = False
+                        for t in range(nbest):
+                            hit |= si[I_ID, t] == si[I_OLD_ID, m]
+                        matched += hit
+                    held = matched == nbest
+                if reset[o]:
+                    steady_slots(sf, si, nbest)
+                    cnt = nbest
+                elif held:
+                    held_slots(sf, si, nbest)
+                    cnt = nbest
+                else:
+                    for m in range(k):
+                        sf[F_OLD_W, m] = s_w[o, m]
+                        si[I_OLD_ST, m] = s_st[o, m]
+                    cnt = fade_object(sf, si, nbest, False, inc, dec, fade_in, fade_out)
+            fading = False
+            for m in range(k):
+                if m < cnt:
+                    st = si[I_NEW_ST, m]
+                    fading |= st != ON
+                    s_w[o, m] = sf[F_NEW_W, m]
+                    o_ids[o, m] = si[I_NEW_ID, m]
+                    o_index[o, m] = si[I_NEW_ROW, m]
+                    o_prio[o, m] = np.float32(sf[F_NEW_P, m])
+                    o_w[o, m] = np.float32(sf[F_NEW_W, m])
+                    o_st[o, m] = st
+                else:
+                    s_w[o, m] = 0.0
+                    o_ids[o, m] = -1
+                    o_index[o, m] = -1
+                    o_prio[o, m] = 0.0
+                    o_w[o, m] = 0.0
+                    o_st[o, m] = 0
+                o_shadow[o, m] = -1
+                s_sel[o, m] = si[I_ID, m] if m < nbest else -1
+            o_count[o] = cnt
+            o_cand[o] = cand
+            o_fading[o] = fading
+            if any_shadow and cnt:
+                pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
+
+
+# --------------------------------------------------------------------------- the objects stage
+
+# Per-object outputs the object pass writes ("visible" is the visibility array itself).
+WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
+# Per-object state kept in the object store: the float64 slot weights and last frame's
+# selection (the slot ids and states are the last frame's light_ids and fade_state).
+STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
+         ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """The objects stage's output: the per-object arrays of DESIGN section 3 (``arrays``,
+    PER_OBJECT), per object whether a slot is fading in or out (``fading``, which keeps
+    the next frame from being "unchanged"), the rows the object pass ran on, and ``how``
+    (added to the lists stage's plan entry)."""
+
+    arrays: dict[str, np.ndarray]
+    fading: np.ndarray
+    run: np.ndarray
+    how: str = ""
+
+
+def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
+                    shadows: ShadowSet, visible: np.ndarray, lights: LightStore,
+                    objects: ObjectStore, renumbered: bool, config: Config, dt: float,
+                    buffers: Buffers) -> Outputs:
+    """The objects stage: top-K with hysteresis, fade and slot_shadow (object_pass) on the
+    rows the pair cache stage gives (every row in a full frame); the other rows are last
+    frame's. A full frame leaves out the objects out of view in it and the two frames
+    before: the output arrays it takes back (the frame before the last's) hold their empty
+    rows already. ``renumbered``: the object rows are not last frame's."""
+    n, k = len(objects), config.max_lights
+    run, how = cache.run, ""
+    if plan.full:
+        out, out_vis = _outputs(last, None, n, k, buffers)
+        fading = np.empty(n, np.bool_)
+        if out_vis is not None and last is not None and not renumbered:
+            run = run_rows((visible, last.visibility.objects, out_vis), buffers)
+            if run.size < n:
+                fading[:] = False
+                how = (f"; {n - run.size} objects out of view keep their empty rows (and in "
+                       "the two frames before)")
+    elif run.size:
+        out = _outputs(last, run, n, k, buffers)[0]
+        fading = last.outputs.fading.copy()
+    else:
+        out = {name: getattr(last.frame, name) for name in WRITTEN}
+        fading = last.outputs.fading
+    if last is not None and run.size:
+        # The last frame's arrays lag this frame's by the rows this frame recomputes.
+        buffers.spare_outputs = SpareOutputs(
+            {name: getattr(last.frame, name) for name in WRITTEN},
+            None if plan.full else run, last.visibility.objects)
+    out["visible"] = visible
+    if run.size:
+        reset = objects.is_new | ~objects.get("was_visible")
+        if plan.reset_all:
+            reset = np.ones(n, np.bool_)
+        state = (read_only_view(objects.get("slot_light")), objects.get("slot_weight"),
+                 read_only_view(objects.get("slot_state")), objects.get("selected"))
+        params = np.array([config.hysteresis, config.hysteresis_abs, _rate(dt, config.fade_in),
+                           _rate(dt, config.fade_out), config.fade_in, config.fade_out])
+        n_l = len(lights)
+        live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
+        object_pass(run, (read_only_view(visible), reset), (cache.seg, cache.heap), live_id,
+                    state, tuple(out[name] for name in WRITTEN) + (fading,), params,
+                    (shadows.shadow_of_row, config.max_shadowed_per_object),
+                    (0,) * k if k in STATIC_K else ())
+    objects.put("slot_light", out["light_ids"])
+    objects.put("slot_state", out["fade_state"])
+    objects.put("was_visible", visible)
+    return Outputs(out, fading, run, how)
+
+
+def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int,
+             buffers: Buffers) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """Arrays for this frame's per-object outputs (WRITTEN): every row is written when
+    ``written`` is None (a full frame), else only those rows are, the others must be the
+    last frame's. The arrays of the frame before the last are taken back when nothing
+    outside holds them any more (a steady scene allocates no output memory) and brought
+    up to date with the rows the last frame changed and this one does not write; else new
+    arrays (copies of the last frame's for an incremental frame). Also, for a full frame
+    that takes them back, the visibility of the frame they held (its invisible objects'
+    rows are empty), else None."""
+    spare, buffers.spare_outputs = buffers.spare_outputs, None
+    if (spare is not None and spare.arrays["light_ids"].shape == (n, k)
+            and not held_elsewhere(spare.arrays)):
+        for arr in spare.arrays.values():
+            arr.setflags(write=True)
+        if written is not None:
+            lag = spare.lag
+            if lag is not None:
+                # Rows this frame writes need no copy: with the same lights moving frame
+                # after frame, that is nearly all of the lag.
+                lag = rows_not_in(lag, written)
+            for name, arr in spare.arrays.items():
+                src = getattr(last.frame, name)
+                if lag is None:
+                    np.copyto(arr, src)
+                else:
+                    copy_rows(src.reshape(n, -1), arr.reshape(n, -1), lag)
+            return spare.arrays, None
+        return spare.arrays, spare.visible if spare.visible.shape == (n,) else None
+    if written is None:
+        return {name: np.empty((n, k) if PER_OBJECT[name][1] == "NK" else n,
+                               PER_OBJECT[name][0]) for name in WRITTEN}, None
+    return {name: getattr(last.frame, name).copy() for name in WRITTEN}, None
+
+
+def run_rows(vis: tuple[np.ndarray, np.ndarray, np.ndarray], buffers: Buffers) -> np.ndarray:
+    """The rows in view in any of ``vis`` (read-only visibilities: this frame's, the last
+    frame's, that of the frame whose arrays are taken back), kept while they are the same
+    arrays: under a still camera they are, frame after frame."""
+    kept = buffers.kept_run
+    if kept is not None and all(a is b for a, b in zip(kept[0], vis, strict=True)):
+        return kept[1]
+    run = np.flatnonzero(vis[0] | vis[1] | vis[2])
+    # (A visibility made in this frame is frozen with it: kept from the next frame on.)
+    buffers.kept_run = None if any(v.flags.writeable for v in vis) else (vis, run)
+    return run
+
+
+def _rate(dt: float, fade_time: float) -> float:
+    return dt / fade_time if fade_time > 0.0 else 1.0
