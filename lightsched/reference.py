@@ -35,6 +35,7 @@ Decisions taken where DESIGN is silent (the fast path makes the same ones):
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from typing import Any
@@ -487,6 +488,12 @@ class Scheduler(SceneAPI):
         super().__init__(config)
         self._state: dict[int, _ObjectState] = {}
         self._shadowed: dict[int, int] = {}  # light id -> tier, last frame's shadow lights
+
+    def _memory(self) -> Any:
+        return copy.deepcopy((self._state, self._shadowed))
+
+    def _put_back(self, memory: Any) -> None:
+        self._state, self._shadowed = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()

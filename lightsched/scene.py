@@ -887,6 +887,14 @@ class SceneAPI:
         """Puts back a ``snapshot`` (the scene, not the frame state of frames since)."""
         self.lights, self.objects = saved
 
+    def _memory(self) -> Any:
+        """What a subclass keeps from frame to frame beside the stores, for ``_put_back``
+        when a transaction fails (nothing here)."""
+        return None
+
+    def _put_back(self, memory: Any) -> None:
+        """Puts back (or drops, when it cannot be trusted) what ``_memory`` returned."""
+
     @contextlib.contextmanager
     def transaction(self) -> Iterator[None]:
         """Scene changes and frames inside happen all or nothing: when the block raises, the
@@ -896,10 +904,10 @@ class SceneAPI:
         Stores copy on write, so references keep most of it. The per-object state arrays a
         frame writes in place (the writeable ones; read-only ones are replaced whole) are
         copied, into buffers kept from the last transaction: a 10k-object scene with K = 8
-        copies ~1 MB (~50 us). What a subclass keeps beside the stores is not put back: the
-        fast Scheduler drops its last-frame cache when a frame stops half way (its next
-        frame is then a full one), but a frame that returned keeps its cache and its
-        shadowed set. So a block ends with its frame, as the service's do."""
+        copies ~1 MB (~50 us). What a subclass keeps beside the stores (last frame's
+        shadowed set, a cache) it puts back or drops through ``_memory`` and
+        ``_put_back``, so a block may also raise after its frame returned."""
+        memory = self._memory()
         lights, objects = self.snapshot()
         frame_index, config = self.frame_index, self.config
         spare, self._spare_state = self._spare_state, {}
@@ -917,6 +925,7 @@ class SceneAPI:
         except BaseException:
             self.restore((lights, objects))
             self.frame_index, self.config = frame_index, config
+            self._put_back(memory)
             raise
         # Nothing else references the copies: the next transaction copies into them.
         self._spare_state = copied

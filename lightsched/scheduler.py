@@ -84,6 +84,15 @@ class Scheduler(SceneAPI):
         self._shadows: ShadowSet | None = None
         self._buffers = Buffers()
 
+    def _memory(self) -> ShadowSet | None:
+        return self._shadows
+
+    def _put_back(self, memory: ShadowSet | None) -> None:
+        # The stores are put back, not the frames: last frame's stage outputs may be of
+        # the frame that was undone, so the next frame is a full one.
+        self._last = None
+        self._shadows = memory
+
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg, tuning, buffers = self.config, self.tuning, self._buffers
         lights, objects = self.lights, self.objects

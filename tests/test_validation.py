@@ -986,6 +986,38 @@ def test_transaction_puts_back_changes_and_a_frame_that_fails(monkeypatch):
         assert np.array_equal(arr, getattr(want, name)), name
 
 
+@pytest.mark.parametrize("cls", [ls.Scheduler, reference.Scheduler],
+                         ids=["fast", "oracle"])
+def test_transaction_that_fails_after_its_frame_puts_back_the_frame_state(cls):
+    """A block that raises after its frame returned: what the scheduler keeps beside the
+    stores (the fast one's last-frame cache and shadowed set, the oracle's fade state by
+    id and shadowed set) goes back too, so the frames after it are those of a twin that
+    never ran the block (here the block's frame shadowed two other lights, which the
+    ranking's hysteresis would otherwise keep)."""
+    from lightsched.scenes import city, move_lights
+
+    sc = city(300, 40, seed=2, shadow_fraction=0.5)
+    cfg = Config(max_lights=3, fade_in=0.2, fade_out=0.2, shadow_budget=2, hysteresis=1.0)
+    a, twin = cls(cfg), cls(cfg)
+    ids = sc.lights["id"]
+    for x in (a, twin):
+        x.set_lights(**sc.lights)
+        x.set_objects(**sc.objects)
+        first = x.frame(sc.cameras, dt=0.05)
+    others = np.setdiff1d(ids[sc.lights["shadows"]], first.shadow_lights)
+    with pytest.raises(RuntimeError, match="after the frame"), a.transaction():
+        a.update_lights(id=others, intensity=np.full(others.size, 1e4))
+        undone = a.frame(sc.cameras, dt=0.05)
+        raise RuntimeError("after the frame")
+    assert not np.array_equal(undone.shadow_lights, first.shadow_lights)
+    for i in (1, 2, 3):
+        for x in (a, twin):
+            x.update_lights(id=ids, position=move_lights(sc.lights, i))
+        got, want = a.frame(sc.cameras, dt=0.05), twin.frame(sc.cameras, dt=0.05)
+        for name, arr in got.arrays().items():
+            assert np.array_equal(arr, getattr(want, name)), (i, name)
+
+
 def test_camera_mappings(s):
     good = dict(position=[0, 0, 0], forward=[0, 0, -1], up=[0, 1, 0], fov_y=1.0, aspect=1.0,
                 near=0.1, far=10.0)
