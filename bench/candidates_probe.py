@@ -12,7 +12,7 @@ walk of the lights that leave their skin in a frame (not the edits of the object
 On the captured inputs of a full frame of city(N, N/10) (every light moving), caches
 flushed before each call, variants interleaved call by call:
 
-- ``light pass + grouping``: pairs.light_bounds, light_pass, group_pairs, as a frame runs
+- ``light pass + grouping``: walk.light_bounds, light_pass, group_pairs, as a frame runs
   them;
 - ``candidates by object row``: the lists per object row, objects walked in row order
   (each object's record is then read at a random grid position); ``records by row``: the

@@ -24,7 +24,14 @@ import numpy as np
 from .grid import light_order
 from .group import group_by_object
 from .jit import GROUP_PARTS, OBJECT_CHUNK, PRANGE_ONLY
-from .priority import MODEL_CONTRIBUTION, aligned_empty, box_d2, record_pair_p
+from .priority import (
+    MODEL_CONTRIBUTION,
+    PackedLights,
+    PairParams,
+    aligned_empty,
+    box_d2,
+    record_pair_p,
+)
 from .simd import (
     LANES,
     SHOWN,
@@ -110,7 +117,7 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
     # Centred ahead of a moving light, along its last step: it crosses the widened sphere
     # before it leaves it, ~(1 + lead) x as many frames.
     positions = (now, now if last_position is None else last_position)
-    exact = grid.records[0].dtype == np.float64
+    exact = grid.records.box.dtype == np.float64
 
     def walk_of(mask: np.ndarray) -> LightPairs:
         # Lists that hold the objects out of view: in float64 records those keep their
@@ -118,10 +125,11 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
         # word meets (SHOWN).
         every = -1.0 if hold and exact else float(SHOWN)
         sel = widen_walkers(hot, mask, positions, wide, (tuning.skin, tuning.lead, every))
-        rows = light_order(hot, sel, grid.index[0], grid.index[1])
-        params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
+        rows = light_order(hot, sel, grid.index.frame, grid.index.dims)
+        params = PairParams(MODEL_CONTRIBUTION, 0.0, 0.0)
         if not hold or exact:
-            return walk_lights((wide, packed.rows[1]), rows, grid, params, buffers, "cand")
+            return walk_lights(PackedLights(wide, packed.rows.f), rows, grid, params, buffers,
+                               "cand")
         # Float32 records, whose out-of-view objects' masks are 0: those carry their own
         # mask during the walk, kept with the visibility and grid they come from.
         if (buffers.hidden is None or buffers.hidden[0] is not grid.shown
@@ -130,11 +138,12 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
             buffers.hidden = (grid.shown, grid.pos_of, grid.pos_of[out_of_view],
                               objects.mask[out_of_view])
         pos, mask_of = buffers.hidden[2:]
-        grid.records[1][pos, 6] = mask_of
+        grid.records.bits[pos, 6] = mask_of
         try:
-            return walk_lights((wide, packed.rows[1]), rows, grid, params, buffers, "cand")
+            return walk_lights(PackedLights(wide, packed.rows.f), rows, grid, params, buffers,
+                               "cand")
         finally:
-            grid.records[1][pos, 6] = 0
+            grid.records.bits[pos, 6] = 0
 
     walked = walk_of(walk_mask)
     if gone.size:
@@ -177,26 +186,24 @@ def _new_lists(walked: LightPairs, grid: Grid, n_l: int, hold: bool,
     spread_lists(start, light_j, lists)
     by_light = (np.zeros((n_l, 2), np.int64), np.empty(2 * light_j.size + 1024, np.int32))
     used = light_lists(walked[:4], by_light, 0)
-    box = np.take(grid.records[0], grid.pos_of, axis=0, mode="wrap",
-                  out=aligned_empty((n, 8), grid.records[0].dtype))
+    box = np.take(grid.records.box, grid.pos_of, axis=0, mode="wrap",
+                  out=aligned_empty((n, 8), grid.records.box.dtype))
     return Candidates(np.zeros((n_l, 4)), lists, by_light, used,
-                      (box, box.view(grid.records[1].dtype)), hold)
+                      (box, box.view(grid.records.bits.dtype)), hold)
 
 # candidate_pairs asks for the light rows of the object this many rows ahead, once
 # light_hot is over PREFETCH_BYTES: an object's candidates are rows of it at random, which
-# the records streaming through L2 push out (on captured inputs, 2 threads: (100k, 10k)
-# 4.32 -> 3.93 ms, (1M, 100k) 60.8 -> 46.6; two objects ahead 4.07 and 51.1, four 4.19;
-# light_f's rows too, 5.61 against 4.87). The 64 KB of 1k lights stay cached: there the
-# prefetches cost +0.04 ms of a full (10k, 1k) frame (paired; bench/RESULTS.md).
+# the records streaming through L2 push out. One object ahead did best, and prefetching
+# light_f's rows too cost more than it saved. The 64 KB of 1k lights stay cached: there the
+# prefetches only cost (bench/RESULTS.md, "Measurements behind the code").
 PREFETCH_OBJECTS = 1
 
 
 PREFETCH_BYTES = 1 << 18
 
 
-# list_objects asks for the seg rows and lists of the lights this far ahead: on a captured
-# lights10 (100k, 10k) input (1000 lights, 61k list entries, caches flushed between
-# calls) ~115 -> ~90 us; 4 and 16-32 lights ahead gave about the same.
+# list_objects asks for the seg rows and lists of the lights this far ahead, cache misses
+# otherwise; the distance matters little (bench/RESULTS.md, "Measurements behind the code").
 LIST_AHEAD = 8
 
 
@@ -208,18 +215,17 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     sphere): per candidate that competes, the exact Affects test and P (record_pair_p, as the
     light pass), then the competing directional lights ``dir_rows``. So a frame whose
     lights moved within their skins walks no grid and groups nothing, and finds the same
-    pairs (bench/RESULTS.md, Next 10 and ebb5ec0: the pairs and lists
-    stages of a full (100k, 10k) frame 8.3 -> 6.6 ms, the lists' upkeep included); an
-    incremental frame, those of the objects a changed light may reach.
+    pairs; an incremental frame, those of the objects a changed light may reach. The
+    lists' upkeep costs less than the walk and grouping they save (bench/RESULTS.md,
+    Next 10 and ebb5ec0).
 
     Under the contribution model with float64 records and no directional light in the
     slots, each chunk of rows runs as a stream (_stream_chunk): their candidates laid end
     to end and taken eight a step in vector code whatever object each belongs to, the spot
     lights' cones eight at a time after them, then the pairs packed into the chunk's room.
-    Object by object (candidate_run, eight candidates of one object a step), a step held
-    6.2 candidates on average and a branch on its spots' cones failed unpredictably (40%
-    of the steps hold a spot): on captured inputs of a full (100k, 10k) frame, 2.81 ->
-    2.07 ms (bench/RESULTS.md). Otherwise object by object: candidate_run, or the scalar
+    Object by object (candidate_run, eight candidates of one object a step), a step was
+    often part empty and a branch on its spots' cones failed unpredictably (bench/RESULTS.md,
+    "Measurements behind the code"). Otherwise object by object: candidate_run, or the scalar
     loop below (other models, "fast" float32 records); where the lights' rows do not stay
     cached, those of the next object's candidates are prefetched while this one's are
     tested (PREFETCH_OBJECTS).
@@ -235,13 +241,13 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     that a caller may size the heap from an estimate or pack it. ``used`` = 0 means no
     segment holds a record (a full frame's seg is new, and not read): an incremental frame
     learns its room and the pairs it drops in the one parallel pass over its rows that
-    sizes the chunks (a serial pass over 44k of 100k rows took ~0.2 ms: those rows' seg
-    entries are cache misses)."""
+    sizes the chunks (a separate serial pass would cost more: those rows' seg entries are
+    cache misses)."""
     c_seg, c_j = cands
     box, bits = recs
     hot, lf = lights
     o_seg, o_p, o_j = out
-    model = int(params[0])
+    model = params.model
     n_rows = rows.shape[0]
     n_dir = dir_rows.shape[0]
     # candidate_run and the stream read whole 8-word rows.
@@ -250,8 +256,8 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     stream = vector and n_dir == 0
     far = hot.nbytes > PREFETCH_BYTES
     n_chunks = (n_rows + OBJECT_CHUNK - 1) // OBJECT_CHUNK
-    # The chunks' rooms summed in parallel: at (1M, 100k) a serial pass over the rows'
-    # lengths (16 MB of segments, read with a stride) took ~0.5 ms.
+    # The chunks' rooms summed in parallel: at (1M, 100k) the rows' lengths are 16 MB of
+    # segments, read with a stride.
     room = np.empty(n_chunks + 1, np.int64)
     room[0] = used
     dropped = np.zeros(n_chunks, np.int64)
@@ -359,7 +365,7 @@ def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
     eight at a time (tests/test_simd.py holds one against the other)."""
     hot, lf = lights
     o_p, o_j = out
-    model = int(params[0])
+    model = params.model
     for t in range(a, b):
         j = np.int64(c_j[t])
         if not compete[j] or ob & np.int64(hot[j, 4]) == 0:
@@ -367,7 +373,7 @@ def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
         d2 = box_d2(box, o, hot[j, 0], hot[j, 1], hot[j, 2])
         if d2 <= hot[j, 3] * hot[j, 3]:
             typ = (np.int64(hot[j, 5]) >> 3) & 3
-            hit, p = record_pair_p(hot, lf, j, typ, o, d2, box, model, params[1], params[2])
+            hit, p = record_pair_p(hot, lf, j, typ, o, d2, box, model, params.w_obj, params.w_int)
             if hit:
                 o_p[m] = p
                 o_j[m] = j
@@ -384,8 +390,8 @@ def widen_walkers(hot, walk, positions, wide, widen):
     type: the lists hold the range test only), and the centre ahead along the light's last
     step by lead x skin x its radius (positions = (world positions now, last frame's); a
     light that did not move keeps its centre). widen = (scheduler.SKIN, scheduler.LEAD,
-    every). One loop over the lights, where numpy took a dozen calls of ~1-3 us each on
-    the walkers' rows.
+    every). One loop over the lights, where numpy took a dozen calls on the walkers' rows,
+    each paying numpy's per-call overhead.
     """
     skin, lead, every = widen
     now, last = positions
@@ -416,9 +422,8 @@ def widen_walkers(hot, walk, positions, wide, widen):
     return sel
 
 
-# left_spheres loops on the calling thread below this many lights: ~2 ns a light, so
-# below a few thousand waking the second thread costs what it would save (1k: 2.6 us on
-# one thread, 2.8 on two).
+# left_spheres loops on the calling thread below this many lights: the test is cheap, so
+# below a few thousand waking the second thread costs what it would save.
 SERIAL_SPHERES = 4096
 
 
@@ -440,8 +445,8 @@ def left_spheres(hot, anchor, own):
     candidate lists were found with (anchor [L, 4]: centre and widened radius, 0 for none),
     i.e. |p - anchor| + r > reach, with room for rounding (while it stays inside, every
     object it reaches is within reach of the anchor). One loop, not numpy on the [L, 8]
-    records' strided columns: 0.02 against ~0.55 ms at 10k lights; parallel from
-    SERIAL_SPHERES lights (10k: 20 -> 11 us)."""
+    records' strided columns, whose temporaries cost many times the loop; parallel from
+    SERIAL_SPHERES lights."""
     out = np.zeros(hot.shape[0], np.bool_)
     if hot.shape[0] < SERIAL_SPHERES:
         for j in range(hot.shape[0]):
@@ -488,7 +493,7 @@ def compact_light_lists(by_light, spare):
     them (the segments light_lists left behind are garbage); returns (seg, object rows,
     records used). The lists, appended frame after frame, lie scattered over the old
     array: copied one light a time in parallel, each a slice (one element at a time on
-    one thread, ~2.5 ms at (100k, 10k) once every ~40-80 frames; bench/RESULTS.md)."""
+    one thread, it was a spike in the frames it falls on; bench/RESULTS.md)."""
     l_seg, l_obj = by_light
     new_seg = np.empty_like(l_seg)
     at = 0
@@ -544,9 +549,8 @@ def reached_rows(reach, visible, more):
     """The rows of the objects an incremental frame reaches through the candidate lists
     (``reach``, list_objects' marks) that are in view, whose pairs it makes again, and the
     rows it runs the object pass on: those, and the rows ``more`` marks (fading ones).
-    Both ascending, int64, in one pass without branches: with ~45% of the rows reached
-    (lights10 at (100k, 10k)), np.flatnonzero of a mask mispredicts on nearly every other
-    row, and the two took ~0.23 ms of the frame (line profile)."""
+    Both ascending, int64, in one pass without branches: with about half of the rows
+    reached (lights10), np.flatnonzero of a mask mispredicts on nearly every other row."""
     n = reach.shape[0]
     rows = np.empty(n, np.int64)
     run = np.empty(n, np.int64)

@@ -28,6 +28,8 @@ from .frustum import CameraFrames
 from .grid import (
     SWEEP_GROUP,
     Grid,
+    GridIndex,
+    Records,
     frame_box,
     grid_shape,
     group_boxes_of,
@@ -36,7 +38,7 @@ from .grid import (
 from .jit import PRANGE_ONLY
 from .priority import box_d2, spot_cone
 from .scene import DIRECTIONAL, SPOT, LightStore, ObjectStore
-from .walk import _column_run, _light_cells, _reach2, _slab_d2, light_bounds
+from .walk import light_bounds, light_runs
 
 if TYPE_CHECKING:
     from .changes import Changes
@@ -158,8 +160,8 @@ def _sweep(v, corners, cen, face_n, face_q, vn, vq):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _volumes(rows, store, cams, splits, overlap):
     """Kernel of ``culling_volumes``: per light of the store rows ``rows`` (store = the
-    light store's type, position, direction: read at those rows here, where three numpy
-    gathers cost ~3-8 us of a small frame) its volumes
+    light store's type, position, direction: read at those rows here, not by three numpy
+    gathers, whose per-call overhead a small frame feels) its volumes
     [L, n_vol, MAX_PLANES, 3] (normals, points), plane counts [L, n_vol] (-1 for the
     volumes a point or spot light does not have: it has one per camera) and, for a
     directional light, the number of leading planes its cascades of camera k share
@@ -270,7 +272,7 @@ def caster_bits(hot, lf, j, typ, t, vn, vq, vm, lo, hi, v, w_lo, w_hi, o):
     mask and d2 <= r*r: the spot cone, then some camera's hull, then the cube faces (point)
     or bit 0 (spot). 0: not a caster. (lo, hi, v): the box as row v of the grid records,
     in the light's frame (the packed light's); (w_lo, w_hi, o): the box as row o of the
-    store, in world space like the volumes. (Arrays one by one: pairs.grid_casters calls
+    store, in world space like the volumes. (Arrays one by one: casters.grid_casters calls
     it once an object.)"""
     if typ == SPOT:
         # float64 whatever the records' precision (float32 + float32 rounds in float32).
@@ -333,10 +335,10 @@ def sweep_casters(lo, hi, casts, omask, lmask, vols):
     camera. Returns bits [T, N] uint32.
 
     A shadow distance is small beside a large scene, so most boxes are rejected, each by
-    whichever plane it lies outside of. Tested box by box with an early exit (the version
-    before this one), 1M boxes took 14.5 ms on 2 threads; plane by plane over blocks of
-    boxes copied into columns (``_block_in_planes``), each block left once it is empty,
-    they take 3.9 ms, most of it the copy (bench/RESULTS.md, issue 6)."""
+    whichever plane it lies outside of. Box by box with an early exit (the version before
+    this one) the loop does not vectorise; plane by plane over blocks of boxes copied into
+    columns (``_block_in_planes``), each block left once it is empty, it does, and most of
+    what remains is the copy (bench/RESULTS.md, issue 6)."""
     vm, shared = vols[2], vols[3]
     n = lo.shape[0]
     bits = np.empty((lmask.shape[0], n), np.uint32)
@@ -459,8 +461,8 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
     g_lo, g_hi = gbox[:, :3], gbox[:, 3:]
     for part in nb.prange(n_parts):
         # The boxes of a group let through, in columns, tested plane by plane as
-        # sweep_casters' blocks are (box by box, an early exit a plane, the ~3-4k objects
-        # of a (10k, 1k) or (100k, 10k) frame's ~50 such groups took ~0.15 ms).
+        # sweep_casters' blocks are (box by box with an early exit a plane was slower, as
+        # there).
         box = np.empty((6, SWEEP_GROUP))
         base, in_cam, inside = (np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.bool_),
                                 np.empty(SWEEP_GROUP, np.bool_))
@@ -596,9 +598,10 @@ def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, 
 def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
     """Casters (DESIGN "Casters") of the shadowed point and spot lights ``rows`` (parallel)
     among the objects of a grid built like the light pass's (visible_order /
-    visible_objects): each light walks the same column runs as ``light_pass`` and keeps
-    the objects that pass ``_caster``. vols = culling volumes indexed like rows; recs =
-    (records [V, 8], their integer view, object row per position); objects = (casts_shadows,
+    visible_objects): each light walks the same column runs as ``light_pass``
+    (walk.light_runs) and keeps the objects that pass ``_caster``. lights: PackedLights;
+    grid: GridIndex; vols = culling volumes indexed like rows; recs: the grid's Records
+    (rows: object rows of the store); objects = (casts_shadows,
     mask, bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
     records may be relative to the first camera); out = (object rows, caster masks), light t
     writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
@@ -618,17 +621,11 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
         j = rows[t]
         light = (j, (np.int64(hot[j, 5]) >> 3) & 3, np.int64(t))
         n = offsets[t]
-        c = _light_cells(hot, j, g_f, dims, ext)
-        rr = _reach2(hot, j)
-        for x in range(c[0], c[3] + 1):
-            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-            if dxx > rr:
-                continue
-            for y in range(c[1], c[4] + 1):
-                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
-                for v in range(v0, v1):
-                    n = _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo,
-                                w_hi, vn, vq, vm, out_rows, out_mask, n)
+        m, runs = light_runs(hot, j, g_f, dims, cell_start, ext, np.empty((16, 2), np.int64))
+        for i in range(m):
+            for v in range(runs[i, 0], runs[i, 1]):
+                n = _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi,
+                            vn, vq, vm, out_rows, out_mask, n)
         for b in range(big_pos.shape[0]):
             n = _caster(hot, lf, light, big_pos[b], box, box_rows, casts, omask, lo, hi, w_lo,
                         w_hi, vn, vq, vm, out_rows, out_mask, n)
@@ -722,7 +719,8 @@ class _Finder:
                            {}, "skipped: no shadow lights")
         found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
         todo = []
-        # A few lights: Python lists, not numpy calls of ~1-5 us each on tiny arrays.
+        # A few lights: Python lists, not numpy calls, whose per-call overhead dominates
+        # on tiny arrays.
         for t, (row, again) in enumerate(zip(shadow_rows.tolist(), recompute.tolist(),
                                              strict=True)):
             if again:
@@ -843,15 +841,15 @@ class _Finder:
         f_box = frame_box(r_box, self.frame)
         shape = grid_shape(f_box[:3], f_box[3:],
                            self.tuning.cell_per_radius * float(np.median(radius)))
-        index, (h_box, h_bits, h_rows), _ = records_grid(
+        index, recs, _ = records_grid(
             lo[hidden], hi[hidden], objs.mask[hidden], np.ones(nh, np.bool_), shape,
             self.frame)
-        return [self._in_grid(rows, index, (h_box, h_bits, hidden[h_rows]), vols)], nh
+        return [self._in_grid(rows, index, recs._replace(rows=hidden[recs.rows]), vols)], nh
 
-    def _in_grid(self, rows: np.ndarray, index: tuple, recs: tuple, vols: tuple
+    def _in_grid(self, rows: np.ndarray, index: GridIndex, recs: Records, vols: tuple
                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per light of ``rows``, (object rows, masks) of its casters in one grid."""
-        offsets = light_bounds(self.packed[0], rows, index, recs[0].shape[0])
+        offsets = light_bounds(self.packed[0], rows, index, recs.box.shape[0])
         out = (np.empty(int(offsets[-1]), np.int64), np.empty(int(offsets[-1]), np.uint32))
         objs = self.objects
         count = grid_casters(self.packed, rows, index, recs,

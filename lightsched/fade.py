@@ -5,7 +5,7 @@ this frame's P and light row of each slot's light (row -1: it no longer affects 
 and this frame's selected set; writes the new slots in output order and returns how many are
 occupied. Eriksson (2006, 3.2) dropped fading because his three-list state cost too much;
 here a slot is a fixed row of K entries, so the machine streams with the object pass of
-pairs.py, where this function is inlined. Scratch layout: select.py (F_*, I_* rows).
+objects.py, where this function is inlined. Scratch layout: select.py (F_*, I_* rows).
 """
 
 from __future__ import annotations

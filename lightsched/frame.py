@@ -24,7 +24,7 @@ FRAME_ARRAYS: dict[str, Any] = {f.name: f.dtype for f in FIELDS}
 # The word types row_words tiles rows with, widest first, with their sizes in bytes.
 _WORDS = ((8, np.uint64), (4, np.uint32), (2, np.uint16))
 
-# The order pairs.object_pass takes its output arrays in (after "visible", its input), which
+# The order objects.object_pass takes its output arrays in (after "visible", its input), which
 # is the scheduler's; fields.py owns the rest.
 _OBJECT_PASS_ORDER = ("visible", "light_ids", "light_index", "priority", "fade_weight",
                       "fade_state", "count", "candidates", "slot_shadow")
@@ -32,7 +32,7 @@ if sorted(_OBJECT_PASS_ORDER) != sorted(PER_OBJECT_NAMES):
     raise RuntimeError("frame._OBJECT_PASS_ORDER must name fields.py's per-object arrays")
 
 # Per-object arrays: dtype, shape ("N" or "NK") and the value of an empty slot (DESIGN
-# section 3), in the order pairs.object_pass writes them.
+# section 3), in the order objects.object_pass writes them.
 PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
     name: (FIELDS_BY_NAME[name].dtype, FIELDS_BY_NAME[name].kind, FIELDS_BY_NAME[name].empty)
     for name in _OBJECT_PASS_ORDER}
@@ -156,8 +156,7 @@ def copy_rows(src, dst, rows):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def rows_not_in(rows, other):
     """The rows of ``rows`` not in ``other`` (both int64, ascending, distinct), ascending:
-    a merge, where a mask of every row took three passes over it (at (100k, 10k) with 10%
-    of the lights moving, ~45k rows each, ~80 us of a frame's outputs)."""
+    a merge, where a mask of every row took three passes over it."""
     out = np.empty(rows.shape[0], np.int64)
     n = 0
     t = 0

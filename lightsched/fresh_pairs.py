@@ -16,7 +16,7 @@ import numpy as np
 from .candidates import candidate_pairs, scalar_candidates
 from .grid import _axis_cells, _cell, visible_objects
 from .jit import PRANGE_ONLY
-from .priority import MODEL_CONTRIBUTION
+from .priority import MODEL_CONTRIBUTION, PairParams
 from .simd import SHOWN, candidate_run
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ FRESH_CHUNK = 512            # objects per parallel work item of grid_pairs
 
 
 def fresh_object_pairs(rows: np.ndarray, objects: ObjectStore, packed: Packed,
-                       params: np.ndarray, frame: tuple[np.ndarray, bool],
+                       params: PairParams, frame: tuple[np.ndarray, bool],
                        cells: tuple | None) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """The pairs of the object ``rows`` (ascending) with every competing light, each object
     tested against all of them (direct_pairs) or, given a grid of the lights ``cells``,
@@ -55,7 +55,7 @@ def fresh_object_pairs(rows: np.ndarray, objects: ObjectStore, packed: Packed,
 def _vector_rows(params, box, lights):
     """Whether simd.candidate_run takes these pairs: the contribution model and whole
     8-word rows of records and lights, which it reads."""
-    return (int(params[0]) == MODEL_CONTRIBUTION and box.shape[1] == 8
+    return (params.model == MODEL_CONTRIBUTION and box.shape[1] == 8
             and lights[0].shape[1] == 8 and lights[1].shape[1] == 8)
 
 
@@ -66,8 +66,8 @@ def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params
     (o_p, o_j); returns the new end. ``vector``: the records and light rows are 8-word
     float64 rows under the contribution model, which simd.candidate_run takes eight
     candidates at a time. candidate_pairs keeps its own copy of these lines: calling this
-    from its parallel loop, a full (100k, 10k) frame's candidates' pass took ~1.3 ms more
-    (paired, twice), though not on captured inputs."""
+    from its parallel loop made a full frame's candidates' pass slower in paired runs,
+    though not on captured inputs."""
     box, bits = recs
     hot, lf = lights
     c_j, a, b = cands
@@ -97,8 +97,8 @@ def direct_pairs(rows, recs, lights, compete, point_rows, dir_rows, params, n):
     light (candidate_pairs' rule with every point and spot light ``point_rows`` a
     candidate): one object a step on the calling thread, no grid. An incremental frame with
     a camera move brings a handful of objects into view; a grid of them walked by every
-    light took ~1.1 ms at (100k, 10k) for one object (the grid's O(N) pass over the rows,
-    10k lights' cell ranges and runs). rows = object rows ascending, recs = their records
+    light costs, even for one object, the grid's O(N) pass over the rows and every light's
+    cell ranges and runs. rows = object rows ascending, recs = their records
     in that order; lights, compete, params as candidate_pairs. Returns (start [n + 1],
     (P, light row)): object rows[r]'s pairs at start[rows[r]]..start[rows[r] + 1], the
     only entries of start written."""
@@ -126,10 +126,8 @@ def light_grid(hot, rows):
     at most LIGHT_GRID_CELLS cells per light. A sphere's cell range is widened as
     _axis_cells widens it, so rounding never drops a light the exact test keeps.
 
-    At (100k, 10k) the grid takes ~0.9 ms to make (31 x 5 x 31 cells of 35 m, ~19 lights
-    a cell) and grid_pairs ~0.4 ms for 981 moved objects; with an edge of 1.5, 1 and 0.5
-    median radii 0.34, 2.4 and 8.1 ms (the city's larger objects then span many cells),
-    with 3 radii 0.52 ms (measured on captured inputs, 2 threads)."""
+    Much finer cells make the city's larger objects span many cells, coarser ones give
+    each object more lights to test (bench/RESULTS.md, "Measurements behind the code")."""
     n = rows.shape[0]
     g_f = np.zeros(6)
     dims = np.ones(3, np.int64)
@@ -247,9 +245,8 @@ def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
     (light_grid): the lights of the cells its box overlaps, and the big ones. The same
     pairs, in another order within an object. The candidates are listed in parallel over
     blocks of FRESH_CHUNK objects, each into a room sized from the cells' starts
-    (_grid_bound), tested by candidate_pairs (its stream: a moved object has ~40
-    candidates here, and one object at a time took ~330 ns an object at (100k, 10k) with
-    10% of the objects moving), and the pairs packed in object order."""
+    (_grid_bound), tested by candidate_pairs (its stream, eight candidates a step across
+    objects: one object at a time was slower), and the pairs packed in object order."""
     n_l = lights[0].shape[0]
     f = rows.shape[0]
     n_chunks = (f + FRESH_CHUNK - 1) // FRESH_CHUNK

@@ -124,8 +124,7 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
     A block of boxes is copied into six columns, then each plane runs over the block with
     its farthest corner's columns chosen once: a loop without branches over contiguous
     columns, which LLVM vectorises (it does not over [N, 3] rows tested box by box with an
-    exit at the first failed plane). City (100k, 10k), one camera, 98% visible: 0.83 ->
-    0.37 ms on two threads, 1.65 -> 0.71 on one (bench/RESULTS.md)."""
+    exit at the first failed plane; bench/RESULTS.md, "Measurements behind the code")."""
     n = bounds_min.shape[0]
     out = np.zeros(n, np.bool_)
     n_blocks = (n + VISIBLE_BLOCK - 1) // VISIBLE_BLOCK
@@ -198,7 +197,7 @@ def _hull(boxes, k):
 
 
 # objects_visible_groups deals the groups to this many parallel parts in turn (not
-# pairs.GROUP_PARTS, the histograms of the pairs' grouping).
+# jit.GROUP_PARTS, the histograms of the pairs' grouping).
 VISIBLE_PARTS = 64
 
 
@@ -273,8 +272,8 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
     """objects_visible over a grid of every object, a group of its positions at a time:
     at = (lo, hi, rows, by_row) the boxes as shadows.group_boxes reads them: position v's
     is row rows[v] of lo and hi if by_row, else row v (a grid's float64 records, in order:
-    the objects of a group are then read as one run, not from 64 random rows, which at
-    (1M, 100k) took the pass to 4.9 ms); groups = (pos_of [N], each row's position; boxes
+    the objects of a group are then read as one run, not from 64 random rows, cache misses
+    at large sizes); groups = (pos_of [N], each row's position; boxes
     [G, 6], the box round each ``size`` consecutive positions' objects; size); last =
     (visible [N], class [G]) of a pass over the same positions, its flags as it left them
     (objects may have moved since within their group boxes), or a class of size 0 for
@@ -289,20 +288,19 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
     the farthest corners the other way. So an IN group (_group_class) holds only visible
     objects, an OUT one none, and the objects of an ACROSS one take objects_visible's test
     one by one. With ``last``, a group whose class is IN or OUT again keeps its objects'
-    flags (they are all that class's): under a camera moving round the (1M, 100k) city
-    only the ~900 groups across a plane and the few that changed class are written, at
-    their rows (0.7-0.9 ms on a frame's captured inputs). Without, the flags are written
-    by position, a group's in one run, then gathered into row order at pos_of, so the
-    parallel parts never write to one cache line at random rows (11662 of 15625 groups
-    wholly in view, 935 across a plane: 1.9 ms, against 4.8 for objects_visible, which
-    reads 48 MB of bounds; bench/RESULTS.md)."""
+    flags (they are all that class's): under a moving camera only the groups across a
+    plane and the few that changed class are written, at their rows. Without, the flags
+    are written by position, a group's in one run, then gathered into row order at
+    pos_of, so the parallel parts never write to one cache line at random rows (faster
+    than objects_visible, which reads every object's bounds; bench/RESULTS.md,
+    "Measurements behind the code")."""
     lo, hi, rows, by_row = at
     pos_of, gbox, size = groups
     vis_last, class_last = last
     since = class_last.shape[0] > 0
     n_g = gbox.shape[0]
     n = pos_of.shape[0]
-    # (A copy, not a loop: numba's loop over bools is not vectorised, 0.5 ms at 1M.)
+    # (A copy, not a loop: numba's loop over bools is not vectorised.)
     flags = vis_last.copy() if since else np.zeros(rows.shape[0], np.bool_)
     cls = np.empty(n_g, np.int8)
     parts = min(VISIBLE_PARTS, n_g)
@@ -348,9 +346,8 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
 
 
 # Below this many lights a per-light kernel (lights_visible, priority._pack,
-# pairs.light_bounds) runs its loop on the calling thread: waking the second costs more
-# than half of such a loop (at city(1000, 100), 99 lights: _pack 30 us on two threads and
-# 7 on one, light_bounds 14 and 6.5; at 995 lights light_bounds 34 and 47).
+# walk.light_bounds) runs its loop on the calling thread: waking the second costs more
+# than such a short loop saves, while about a thousand lights gain from it.
 SERIAL_LIGHTS = 512
 
 
@@ -385,10 +382,10 @@ def _visible_block(a0, size, light_type, position, radius, plane_n, plane_p, out
 def lights_visible(light_type, position, radius, plane_n, plane_p):
     """Point/spot: the ball (position, r) is in some frustum; directional: always.
 
-    In blocks of VISIBLE_BLOCK lights (_visible_block): 31 -> 16 us at 10k lights, 282 ->
-    121 at 100k (city, 2 threads, medians of 300 calls), where a loop light by light with
-    an exit at the first failed plane took the former (and the six planes and'ed light by
-    light, on the [L, 3] rows, was slower still: bench/RESULTS.md)."""
+    In blocks of VISIBLE_BLOCK lights (_visible_block), which vectorise, where a loop
+    light by light with an exit at the first failed plane does not (and the six planes
+    and'ed light by light, on the [L, 3] rows, was slower still; bench/RESULTS.md,
+    "Measurements behind the code")."""
     n = light_type.shape[0]
     out = np.empty(n, np.bool_)
     n_blocks = (n + VISIBLE_BLOCK - 1) // VISIBLE_BLOCK

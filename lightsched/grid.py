@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -249,9 +249,9 @@ def move_records(lo, hi, rows, shown_mask, grid, recs, pos_of, frame):
     object's new box lies inside that widened slab, whatever cell its centre is now in;
     the big objects after the cells, which every light tests, take any box. Returns False,
     having written nothing, when a box leaves its slab: the grid is then made again. An
-    object moving a little each frame keeps its record for many frames, where making the
-    grid of 100k objects took ~5 ms (1000 records rewritten: ~0.3 ms on one thread, each
-    a few cache misses). frame = (origin, single) as record_coord."""
+    object moving a little each frame keeps its record for many frames: a record
+    rewritten costs a few cache misses, the grid made again a pass over every object.
+    frame = (origin, single) as record_coord."""
     vis_box, vis_bits = recs
     origin = frame[0]
     n_small = grid[2][grid[1][0] * grid[1][1] * grid[1][2]]
@@ -334,18 +334,35 @@ def widen_group_boxes(boxes, lo, hi, rows, pos_of):
 # --------------------------------------------------------------------------- the grid stage
 
 
+class GridIndex(NamedTuple):
+    """Where a grid's objects are (records_grid): the kernels' view of its cells."""
+
+    frame: np.ndarray       # float64 [6]: the origin of cell (0, 0, 0) and 1/h per axis
+    dims: np.ndarray        # int64 [3]: cells per axis (z RUN_SPLIT x finer)
+    cell_start: np.ndarray  # int64 [cells + 1]: cell c's records are at [start[c], start[c+1])
+    ext: np.ndarray         # float64 [3]: the largest half-extent of an object in a cell
+    big_pos: np.ndarray     # int32: positions of the objects larger than a cell (past them)
+
+
+class Records(NamedTuple):
+    """A grid's object records in grid order (grid.visible_objects writes them)."""
+
+    box: np.ndarray   # [V, 8] float64 (float32 in "fast"): lo [3], hi [3], mask, e2
+    bits: np.ndarray  # the same memory as unsigned integers (the mask word, column 6)
+    rows: np.ndarray  # int64 [V]: each position's object row
+
+
 @dataclass
 class Grid:
-    """The grid of objects a frame walks. ``index`` = (origin and 1/h [6], dims [3],
-    cell_start, ext, big_pos) and ``records`` = (records [V, 8], their integer view, object
-    row per position). Either a grid of the visible objects (``shown`` None), or of every
-    object (``shown`` the visibility its records hold: an invisible object's record has no
-    SHOWN bit in its mask word, so it pairs with no light (shown_mask); ``pos_of`` each
-    row's position, ``box`` every object's bounding box, which set the grid's extent).
-    ``how``: how it was made, for the plan; ``kept``: it is last frame's."""
+    """The grid of objects a frame walks: its ``index`` and ``records``. Either a grid of
+    the visible objects (``shown`` None), or of every object (``shown`` the visibility its
+    records hold: an invisible object's record has no SHOWN bit in its mask word, so it
+    pairs with no light (shown_mask); ``pos_of`` each row's position, ``box`` every
+    object's bounding box, which set the grid's extent). ``how``: how it was made, for the
+    plan; ``kept``: it is last frame's."""
 
-    index: tuple
-    records: tuple
+    index: GridIndex
+    records: Records
     how: str
     shown: np.ndarray | None = None
     pos_of: np.ndarray | None = None
@@ -381,7 +398,8 @@ def object_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
         # The lights set the cell edge: the kept grid serves while it is the same.
         shape = grid_cells(n_vis, vis.box, packed, frame, tuning)
         old = last.grid
-        if np.array_equal(shape[0], old.index[0]) and np.array_equal(shape[1], old.index[1]):
+        if np.array_equal(shape[0], old.index.frame) and np.array_equal(shape[1],
+                                                                        old.index.dims):
             grid = Grid(old.index, old.records, shape[2] or old.how, kept=True)
             note = " (kept: the objects and cameras did not change)"
         else:
@@ -413,7 +431,7 @@ def _every_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
         g = last.grid
         kept = move_records(objects.bounds_min, objects.bounds_max, orows,
                             shown_mask(vis.objects[orows], objects.mask[orows], frame[1]),
-                            g.index, g.records[:2], g.pos_of, frame)
+                            g.index, (g.records.box, g.records.bits), g.pos_of, frame)
         if kept and g.group_box is not None:
             widen_group_boxes(g.group_box, objects.bounds_min, objects.bounds_max, orows,
                               g.pos_of)
@@ -438,9 +456,9 @@ def _every_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
         if (shape[2] is not None) != last.grid.how.startswith("brute"):
             kept = False
         elif shape[2] is not None:
-            kept = np.array_equal(shape[0], old[0]) and np.array_equal(shape[1], old[1])
+            kept = np.array_equal(shape[0], old.frame) and np.array_equal(shape[1], old.dims)
         else:
-            ratio = shape[0][3] / old[0][3]  # kept edge over the edge asked for
+            ratio = shape[0][3] / old.frame[3]  # kept edge over the edge asked for
             kept = 1 / tuning.cell_slack <= ratio <= tuning.cell_slack
         if not kept and orows.size:
             # The kept box missed the objects that moved.
@@ -452,7 +470,7 @@ def _every_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
                 else vis.flipped if g.shown is last.visibility.objects
                 else np.flatnonzero(vis.objects != g.shown))
         if rows.size:
-            g.records[1][g.pos_of[rows], 6] = shown_mask(vis.objects[rows], objects.mask[rows],
+            g.records.bits[g.pos_of[rows], 6] = shown_mask(vis.objects[rows], objects.mask[rows],
                                                          frame[1])
         how = g.how.split(" (kept", 1)[0] + (
             f" (kept: {moved}; {rows.size} records' visibility updated)")
@@ -522,9 +540,9 @@ def grid_cells(n_sel: int, box: np.ndarray, packed: Packed, frame: tuple[np.ndar
     return g_f, dims, None
 
 
-def grid_text(what: str, index: tuple) -> str:
+def grid_text(what: str, index: GridIndex) -> str:
     """How a grid of ``what`` was made: its cells and how many objects it tests directly."""
-    g_f, dims, big_pos = index[0], index[1], index[4]
+    g_f, dims, big_pos = index.frame, index.dims, index.big_pos
     return (f"grid of {what} ({dims[0]}x{dims[1]}x{dims[2]} cells of {1 / g_f[3]:.3g} m, "
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
 
@@ -535,8 +553,9 @@ def group_boxes_of(grid: Grid, lo: np.ndarray, hi: np.ndarray, single: bool
     boxes made from them if it has none yet. Its records hold the world boxes in exact
     precision (origin 0, float64), in grid order; "fast" ones (``single``) are rounded, so
     the stores' boxes (lo, hi) are read by row."""
-    boxes = ((lo, hi, grid.records[2], True) if single else
-             (grid.records[0][:, :3], grid.records[0][:, 3:6], grid.records[2], False))
+    box = grid.records.box
+    boxes = ((lo, hi, grid.records.rows, True) if single else
+             (box[:, :3], box[:, 3:6], grid.records.rows, False))
     if grid.group_box is None:
         grid.group_box = group_boxes(boxes)
     return boxes
@@ -556,10 +575,9 @@ def shown_mask(shown: np.ndarray, mask: np.ndarray, single: bool) -> np.ndarray:
 
 def records_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.ndarray,
                  shape: tuple[np.ndarray, np.ndarray], frame: tuple[np.ndarray, bool],
-                 out: np.ndarray | None = None) -> tuple[tuple, tuple, np.ndarray]:
+                 out: np.ndarray | None = None) -> tuple[GridIndex, Records, np.ndarray]:
     """The selected rows of (lo, hi, mask) sorted into the grid shape = (g_f, dims), and
-    their records: (index (g_f, dims, cell_start, ext, big_pos), (records [V, 8], their
-    integer view, row per position), position per row or -1). Records are float64, or
+    their records: (GridIndex, Records, position per row or -1). Records are float64, or
     float32 in "fast" precision, written into the front of ``out`` (1-d, of that dtype)
     if given."""
     g_f, dims = shape
@@ -571,4 +589,5 @@ def records_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.nd
     vis_bits = vis_box.view(np.uint32 if frame[1] else np.uint64)
     ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
     big_pos = np.arange(n_small, nv, dtype=np.int32)
-    return (g_f, dims, cell_start, ext, big_pos), (vis_box, vis_bits, vis_rows), pos_of
+    return (GridIndex(g_f, dims, cell_start, ext, big_pos), Records(vis_box, vis_bits, vis_rows),
+            pos_of)

@@ -86,10 +86,8 @@ def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
 
 def group_parts(n_pairs: int) -> int:
     """The histogram rows (runs) group_pairs takes for n_pairs pairs: one below
-    SERIAL_PAIRS, else GROUP_PARTS. On a frame's captured inputs (caches flushed, paired
-    medians), one run against two: (1k, 100) full, 3.7k pairs, -25 us of ~77; (10k, 1k)
-    lights10, 3.7k pairs, -29 of ~125; (100k, 10k) lights10, 44k pairs, 841 against 791
-    us; (1M, 100k) lights10, 360k pairs, 7.55 against 6.58 ms (bench/RESULTS.md)."""
+    SERIAL_PAIRS, else GROUP_PARTS: a few thousand pairs are grouped faster on one
+    thread, tens of thousands on two (bench/RESULTS.md, "Measurements behind the code")."""
     return 1 if n_pairs < SERIAL_PAIRS else GROUP_PARTS
 
 
@@ -121,9 +119,9 @@ def _place_run(q, parts, rows, offsets, count, pair_obj, pair_p, hist, pair_p_ou
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def group_few(rows, offsets, count, pair_obj, pair_p):
     """group_pairs for a few pairs: a stable sort by object row instead of a histogram of
-    every object, whose O(N) clearing and prefix sum took ~0.4 ms at 100k objects for no
-    pair at all. Returns (object row per pair, ascending; (P, light row)), each object's
-    lights in the order of ``rows``; ``start_at`` gives the segments."""
+    every object, whose O(N) clearing and prefix sum cost as much for no pair at all.
+    Returns (object row per pair, ascending; (P, light row)), each object's lights in the
+    order of ``rows``; ``start_at`` gives the segments."""
     n_pairs = 0
     for t in range(rows.shape[0]):
         n_pairs += count[t]

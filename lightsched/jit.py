@@ -2,9 +2,9 @@
 
 numba's ``parallel=True`` also turns whole-array numpy calls inside a kernel (``np.zeros``,
 ``np.full``, ``a.sum()``, ``a.max()``, ``a[:] = x``) into parallel loops of their own, and
-each one, however small, wakes the second thread and waits for it: ~1 us a call on this
-2-core box (``pairs.light_bounds`` on 3 lights took 3.2 us, with its two ``np.zeros`` left
-serial 1.1). The kernels say where they want both cores, with ``prange``; ``PRANGE_ONLY``
+each one, however small, wakes the second thread and waits for it, which can cost more
+than a small kernel's whole work (bench/RESULTS.md, "Measurements behind the code"). The
+kernels say where they want both cores, with ``prange``; ``PRANGE_ONLY``
 keeps everything else on the calling thread.
 """
 

@@ -6,7 +6,7 @@ shadowed slots (shadows.pick_slot_shadows), outputs out.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -47,6 +47,40 @@ if TYPE_CHECKING:
     from .shadows import ShadowSet
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
+
+# Per-object outputs the object pass writes ("visible" is the visibility array itself).
+WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
+# The object pass's output arrays: WRITTEN (DESIGN section 3), each [N, K] or [N], and
+# ``fading`` bool [N], whether a slot of the object is fading in or out.
+ObjectOutputs = NamedTuple("ObjectOutputs", [(name, np.ndarray) for name in WRITTEN]
+                           + [("fading", np.ndarray)])
+
+
+class SlotState(NamedTuple):
+    """The per-object state the object pass reads, each [N, K] (the object store's)."""
+
+    light_ids: np.ndarray  # int32: last frame's light_ids (read-only)
+    weight: np.ndarray     # float64: the slots' weights, updated in place
+    state: np.ndarray      # uint8: last frame's fade_state (read-only)
+    selected: np.ndarray   # int32: last frame's selected lights, updated in place
+
+
+class FadeParams(NamedTuple):
+    """The rules of DESIGN section 2, "Selection" (hysteresis) and "Fade", for one dt."""
+
+    hysteresis: float
+    hysteresis_abs: float
+    fade_in_step: float   # dt / fade_in, a weight's step up a frame (1 when fade_in is 0)
+    fade_out_step: float  # dt / fade_out
+    fade_in: float
+    fade_out: float
+
+
+class SlotShadows(NamedTuple):
+    """What slot_shadow reads (DESIGN section 2, "Shadows")."""
+
+    shadow_of_row: np.ndarray  # int: per light row its shadow map index, or -1
+    max_shadowed: int          # Config.max_shadowed_per_object
 
 
 def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -92,14 +126,9 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
     (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the
     heap, heap = (P float64 [H], light row int32 [H])): the pair cache; live_id = per light
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
-    (``live_ids``; pairs of other lights are kept in the cache but do not compete); state =
-    (slot ids, slot weights f64, slot states, selected ids), each [N, K]: the ids and states
-    are last frame's light_ids and fade_state outputs, the weights and selection are updated
-    in place; out = (light_ids, light_index, priority f32, fade_weight f32, fade_state,
-    count, candidates, slot_shadow int8, fading bool [N]: a slot is fading in or out);
-    params = (h, h_abs, dt/fade_in, dt/fade_out, fade_in, fade_out); shadow = (shadow map
-    index per light row or -1, max_shadowed_per_object); k_static = a tuple of K zeros if K
-    is in STATIC_K, else ().
+    (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
+    SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; k_static = a
+    tuple of K zeros if K is in STATIC_K, else ().
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
@@ -110,22 +139,24 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
     """
     visible, reset = objs
     seg, (heap_p, heap_j) = lists
-    s_id, s_w, s_st, s_sel = state
-    o_ids, o_index, o_prio, o_w, o_st, o_count, o_cand, o_shadow, o_fading = out
-    shadow_of_row, max_shadowed = shadow
+    s_id, s_w, s_st, s_sel = state.light_ids, state.weight, state.state, state.selected
+    o_ids, o_index, o_prio, o_w = out.light_ids, out.light_index, out.priority, out.fade_weight
+    o_st, o_count, o_cand, o_shadow = out.fade_state, out.count, out.candidates, out.slot_shadow
+    o_fading = out.fading
+    shadow_of_row, max_shadowed = shadow.shadow_of_row, shadow.max_shadowed
     any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
-    h = params[0]
-    h_abs = params[1]
-    inc = params[2]
-    dec = params[3]
-    fade_in = params[4]
-    fade_out = params[5]
+    h = params.hysteresis
+    h_abs = params.hysteresis_abs
+    inc = params.fade_in_step
+    dec = params.fade_out_step
+    fade_in = params.fade_in
+    fade_out = params.fade_out
     n_run = run.shape[0]
     # A common K is a compile-time constant, the length of a tuple (its type holds it):
     # every per-slot loop then has a known trip count, which LLVM unrolls and vectorises
-    # whole (-0.4 ms of ~6.7 at (100k, 10k), bench/RESULTS.md). Each such K costs a
-    # compilation of this kernel (~13 s, then cached), so only STATIC_K are; any other K
-    # is read from the arrays. (numba.literally would re-type every call: ~1.5 s each.)
+    # whole (bench/RESULTS.md, "Measurements behind the code"). Each such K costs a
+    # compilation of this kernel (slow, then cached), so only STATIC_K are; any other K
+    # is read from the arrays. (numba.literally would type the kernel again every call.)
     k = len(k_static) if len(k_static) else s_id.shape[1]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0), h,
@@ -231,9 +262,6 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
 
 
 # --------------------------------------------------------------------------- the objects stage
-
-# Per-object outputs the object pass writes ("visible" is the visibility array itself).
-WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
 # Per-object state kept in the object store: the float64 slot weights and last frame's
 # selection (the slot ids and states are the last frame's light_ids and fade_state).
 STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
@@ -289,15 +317,16 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
         reset = objects.is_new | ~objects.get("was_visible")
         if plan.reset_all:
             reset = np.ones(n, np.bool_)
-        state = (read_only_view(objects.get("slot_light")), objects.get("slot_weight"),
-                 read_only_view(objects.get("slot_state")), objects.get("selected"))
-        params = np.array([config.hysteresis, config.hysteresis_abs, _rate(dt, config.fade_in),
-                           _rate(dt, config.fade_out), config.fade_in, config.fade_out])
+        state = SlotState(read_only_view(objects.get("slot_light")), objects.get("slot_weight"),
+                          read_only_view(objects.get("slot_state")), objects.get("selected"))
+        params = FadeParams(*map(float, (config.hysteresis, config.hysteresis_abs,
+                                         _rate(dt, config.fade_in), _rate(dt, config.fade_out),
+                                         config.fade_in, config.fade_out)))
         n_l = len(lights)
         live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
         object_pass(run, (read_only_view(visible), reset), (cache.seg, cache.heap), live_id,
-                    state, tuple(out[name] for name in WRITTEN) + (fading,), params,
-                    (shadows.shadow_of_row, config.max_shadowed_per_object),
+                    state, ObjectOutputs(*(out[name] for name in WRITTEN), fading), params,
+                    SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     (0,) * k if k in STATIC_K else ())
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])

@@ -30,7 +30,7 @@ from .walk import walk_lights
 if TYPE_CHECKING:
     from .grid import Grid
     from .plan import FramePlan
-    from .priority import Packed
+    from .priority import Packed, PairParams
     from .scheduler import FrameState
     from .shadows import ShadowSet
     from .tuning import Tuning
@@ -47,8 +47,8 @@ def _scan_object(o, seg, heap_j, light_flag, drop):
     Objects hold a few pairs each (4.4 on average in the city, 0 to 16), so a loop over
     each list's length mispredicts its exit about once an object. The first SCAN_LANES
     pairs are read in a loop of fixed length instead, the lanes past the end reading the
-    last pair again and counting nothing: on a lights10 frame's captured inputs at (100k,
-    10k), 1.03 -> 0.81 ms (4 lanes 0.93, 12 lanes 1.08)."""
+    last pair again and counting nothing; eight lanes did better than 4 or 12
+    (bench/RESULTS.md, "Measurements behind the code")."""
     a = seg[o, 0]
     size = seg[o, 1]
     acc = 0
@@ -72,7 +72,7 @@ def scan_pairs(seg, heap_j, light_flag, drop):
     so an incremental frame finds the objects that hold a pair of a changed light, and
     the number of its pairs whose light's flag has no ``drop`` bit: the pairs
     ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
-    over the rewritten lists cost 0.34 of replace_lists' 0.82 ms at 100k objects)."""
+    over the rewritten lists was a large share of replace_lists' time)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
     kept = np.empty(n, np.int64)
@@ -355,7 +355,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
 
 
 def _near_rows(plan: FramePlan, c: PairCache, flagged: np.ndarray, light_rows: np.ndarray,
-               packed: Packed, grid: Grid, params: np.ndarray, tuning: Tuning,
+               packed: Packed, grid: Grid, params: PairParams, tuning: Tuning,
                buffers: Buffers) -> np.ndarray | None:
     """The objects that can hold a pair of the lights ``flagged``, when none of them
     changed this frame: each such pair was made with the light as it is, so an object
@@ -366,7 +366,7 @@ def _near_rows(plan: FramePlan, c: PairCache, flagged: np.ndarray, light_rows: n
     if (plan.fast or flagged.size * tuning.near_scan_pairs > c.pairs
             or packed.is_dir[flagged].any() or np.isin(flagged, light_rows).any()):
         return None
-    order = light_order(packed.rows[0], flagged.astype(np.int32), grid.index[0], grid.index[1])
+    order = light_order(packed.rows[0], flagged.astype(np.int32), grid.index.frame, grid.index.dims)
     walked = walk_lights(packed.rows, order, grid, params, buffers, "near")
     return np.unique(np.concatenate(
         [walked.obj[walked.offsets[t]:walked.offsets[t] + walked.count[t]]

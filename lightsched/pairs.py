@@ -28,7 +28,7 @@ from .buffers import Buffers
 from .candidates import Candidates, list_objects, update_candidates
 from .fresh_pairs import fresh_object_pairs, light_grid
 from .grid import Grid, light_order
-from .priority import MODEL_CONTRIBUTION, MODEL_THESIS, Packed
+from .priority import Packed, PairParams
 from .scene import Config, LightStore, ObjectStore
 from .tuning import Tuning
 from .walk import LightPairs, walk_lights
@@ -54,7 +54,7 @@ class Pairs:
     the pairs' P; ``how``: the plan's entry."""
 
     path: str
-    params: np.ndarray
+    params: PairParams
     walked: np.ndarray = field(default_factory=lambda: _NO_LIGHTS)
     lights: LightPairs | None = None
     objects: tuple | None = None
@@ -69,8 +69,7 @@ def find_pairs(plan: FramePlan, last: FrameState | None, lights: LightStore,
                light_rows: np.ndarray | None, config: Config, tuning: Tuning,
                buffers: Buffers) -> Pairs:
     """The pairs stage. ``light_rows``: the lights that changed (changes.Changes)."""
-    model = MODEL_CONTRIBUTION if config.model == "contribution" else MODEL_THESIS
-    params = np.array([model, config.w_obj, config.w_int])
+    params = PairParams.of(config)
     # Candidate lists serve while the objects, the records' origin and the grid of every
     # object are the ones they were made with (plan.candidates, grid.kept).
     serve = plan.candidates and grid.kept and grid.shown is not None
@@ -106,7 +105,7 @@ def find_pairs(plan: FramePlan, last: FrameState | None, lights: LightStore,
                        "their pairs from their candidate lists")
     if plan.full:
         rows = light_order(packed.rows[0], np.flatnonzero(packed.compete).astype(np.int32),
-                           grid.index[0], grid.index[1])
+                           grid.index.frame, grid.index.dims)
         return Pairs(WALK, params, lights=walk_lights(packed.rows, rows, grid, params, buffers,
                                                       "pair"),
                      how=f", walked by {rows.size} lights")
@@ -131,20 +130,20 @@ def _kept_candidates(last: FrameState, vis: Visibility, grid: Grid) -> Candidate
         if not cands.hidden and vis.objects[flipped].any():
             return None
         # The grid's records have theirs already (grid._every_grid).
-        cands.records[1][flipped, 6] = grid.records[1][grid.pos_of[flipped], 6]
+        cands.records[1][flipped, 6] = grid.records.bits[grid.pos_of[flipped], 6]
     return cands
 
 
 def _patch_pairs(last: FrameState, changed: np.ndarray, light_rows: np.ndarray,
                  objects: ObjectStore, vis: Visibility, packed: Packed, grid: Grid,
-                 params: np.ndarray, frame: tuple[np.ndarray, bool], tuning: Tuning,
+                 params: PairParams, frame: tuple[np.ndarray, bool], tuning: Tuning,
                  buffers: Buffers) -> Pairs:
     """The ``patch`` path: the changed lights that compete walk the grid again; the objects
     that moved or came into view get their pairs with every light, each tested against
     every light when there are few, else against the lights of the cells its box overlaps
     in a grid of the lights (kept while no light changes)."""
     walk = changed[packed.compete[changed]].astype(np.int32)
-    walk = light_order(packed.rows[0], walk, grid.index[0], grid.index[1])
+    walk = light_order(packed.rows[0], walk, grid.index.frame, grid.index.dims)
     walked = walk_lights(packed.rows, walk, grid, params, buffers, "pair")
     fresh = vis.fresh
     n_point = int(np.count_nonzero(packed.compete & ~packed.is_dir)) if fresh.size else 0

@@ -4,7 +4,7 @@ Takes a packed light row (see ``pack_lights``) and an object's box; returns whet
 affects the object and the pair's priority P, as pieces: ``box_d2`` (the range test is
 d2 <= r*r), ``spot_cone`` (cone test and spot factor s), ``falloff`` (contribution:
 P = falloff * s + p_user), ``thesis`` (Eriksson eq. 3.1); directional lights have
-P = i + p_user. pairs.light_pass composes them per pair; this module owns the rules.
+P = i + p_user. walk.light_pass composes them per pair; this module owns the rules.
 
 Packed lights, two float64 row arrays, so that a point light's whole pair computation
 reads one 64-byte record: ``light_hot[L, 8]``: 0-2 position, 3 radius, 4 mask, 5 code =
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -33,6 +33,20 @@ if TYPE_CHECKING:
 
 R0 = 0.1  # metres: keeps the contribution finite when a light sits on the object
 MODEL_CONTRIBUTION, MODEL_THESIS = 0, 1
+
+
+class PairParams(NamedTuple):
+    """What a pair's P needs beside the light and the object (DESIGN section 2,
+    "Priority"): the model and the thesis model's weights."""
+
+    model: int    # MODEL_CONTRIBUTION or MODEL_THESIS
+    w_obj: float
+    w_int: float
+
+    @staticmethod
+    def of(config: Config) -> PairParams:
+        return PairParams(MODEL_CONTRIBUTION if config.model == "contribution" else MODEL_THESIS,
+                          float(config.w_obj), float(config.w_int))
 CACHE_LINE = 64  # bytes
 
 
@@ -86,7 +100,7 @@ def _pack_cone(j, lf, typ, outer, inner):
         lf[j, 5] = cos_i if inner[j] != outer[j] and cos_i != lf[j, 3] else np.nan
     else:
         # Only a spot light's cone is read (its type is packed with it): the three
-        # cosines and sines were ~60% of packing 100k lights (0.8 of 1.35 ms).
+        # cosines and sines were most of the time of packing the lights.
         lf[j, 3] = 1.0
         lf[j, 4] = 0.0
         lf[j, 5] = np.nan
@@ -97,7 +111,7 @@ def _pack_row(j, hot, lf, typ, position, radius, direction, outer, inner, intens
               mask, ids, cam_pos, cam_basis, cam_tan, cam_focus, thesis_w, origin, parts):
     # The arrays come one by one, not as _pack's tuples: a tuple unpacked once a row kept
     # its reference counting in the loop, 20 atomic operations a light on counts both
-    # threads share (packing 10k lights 211 -> 36 us).
+    # threads share, which cost several times the packing itself.
     if parts & PACK_POSITION:
         for k in range(3):
             hot[j, k] = position[j, k] - origin[k]
@@ -159,10 +173,17 @@ def light_columns(lights: LightStore) -> tuple[np.ndarray, ...]:
             lights.inner_angle, lights.intensity, lights.priority, lights.mask, lights.id)
 
 
+class PackedLights(NamedTuple):
+    """The lights in the packed layout above, [L, 8] float64 each, by light row."""
+
+    hot: np.ndarray  # light_hot: what the range test and the contribution model read
+    f: np.ndarray    # light_f: the spot cone, id and the thesis camera term
+
+
 def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: float,
                 c1: float, camera_term: bool = True, origin: np.ndarray | None = None,
-                into: tuple[tuple[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
-                parts: int = PACK_ALL) -> tuple[np.ndarray, np.ndarray]:
+                into: tuple[PackedLights, np.ndarray | None] | None = None,
+                parts: int = PACK_ALL) -> PackedLights:
     """Packs the light store into the row layout above (one cache-friendly row per light).
     Without ``camera_term`` (the contribution model, which does not read it) light_f
     column 7 is -inf: the eccentricity is the packing's costliest part. Positions are
@@ -177,11 +198,12 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
     if into is None:
         # One buffer for both: rows of 64 bytes, so light_f starts on a cache line too.
         out = aligned_empty((2, len(lights.id), 8))
-        packed, rows, parts = (out[0], out[1]), None, PACK_ALL
+        packed, rows, parts = PackedLights(out[0], out[1]), None, PACK_ALL
     else:
         packed, rows = into
-    return _pack(rows, light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
-                 np.zeros(3) if origin is None else origin, packed, np.int64(parts))
+    return PackedLights(*_pack(rows, light_columns(lights), cam_columns, np.array([w_ecc, w_dist, c1]),
+                 np.zeros(3) if origin is None else origin, packed,
+                                np.int64(parts)))
 
 
 @dataclass(frozen=True)
@@ -191,7 +213,7 @@ class Packed:
     compete for slots (visible, and not directional unless directional_in_slots); which
     are directional (``is_dir``, and their rows ``dir_all``, a few)."""
 
-    rows: tuple[np.ndarray, np.ndarray]
+    rows: PackedLights
     origin: np.ndarray
     compete: np.ndarray
     is_dir: np.ndarray

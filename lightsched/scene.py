@@ -154,12 +154,12 @@ def _camera_vector(name: str, i: int, value: Any, n: int) -> tuple[np.ndarray, l
     kind = type(value)
     if kind is np.ndarray and value.shape == (n,) and value.dtype == np.float64:
         # What the wire and the Python client send: three Python floats checked cost a
-        # third of numpy's checks on a three-element array (~0.6 against ~2 us).
+        # fraction of numpy's checks on a three-element array.
         values = value.tolist()
     elif (kind is tuple or kind is list) and len(value) == n and all(
             type(v) is float for v in value):
         # Camera's default focus, and the vectors of a mapping: np.asarray, np.isfinite and
-        # a copy took ~4 us of a ~15 us camera.
+        # a copy were a large share of checking a camera.
         values = list(value)
     else:
         values = None
@@ -269,8 +269,8 @@ def _seal(c: Camera) -> Camera:
     """Marks a camera validate_cameras made: its vectors read-only and the objects of its
     fields recorded, so that it passes again unchecked while they are the same. The
     service checks a request's cameras before its scene changes (a bad camera refuses the
-    request with nothing changed), then ``Scheduler.frame`` checks them again: ~20 us of a
-    ~1.2 ms service frame at 1k objects."""
+    request with nothing changed), then ``Scheduler.frame`` would check them again, a cost
+    a small service frame feels."""
     for v in (c.position, c.forward, c.up, c.focus):
         v.setflags(write=False)
     c.__dict__["_checked"] = _camera_fields(c)
@@ -292,7 +292,7 @@ def validate_dt(dt: Any) -> float:
 
 def _first_bad(mask: np.ndarray) -> int | None:
     """Index of the first True row of a per-row mask (rows may have trailing axes)."""
-    # Valid input is the rule: one any() then, ~1 us against ~6 for the row reduction.
+    # Valid input is the rule: one any() then, cheaper than the row reduction.
     if not mask.any():
         return None
     if mask.ndim > 1:
@@ -450,14 +450,14 @@ def _id_rows(store: Any, ids_in: Any, what: str) -> tuple[np.ndarray, np.ndarray
 def _bulk_rows(store: Any, ids: np.ndarray) -> np.ndarray | None:
     """Store rows of ``ids`` (at least one) by an id -> row table kept until the store's
     ids change, and duplicates found by marking rows (many ids) or sorting the rows (few):
-    where np.searchsorted and the duplicate check's np.argsort cost ~10 + 6 ms for 100k
-    ids, and ~110 us for 1000 random ids among 100k rows. Made at the first update after
+    where np.searchsorted and the duplicate check's np.argsort cost far more, for many ids
+    as for a few among many rows. Made at the first update after
     a set_ (its O(N) is that of the copy every update makes of each array it writes).
     None if an id is out of range, unknown or repeated (the caller's checks then name
     it), or if the ids are too sparse for a table."""
     store_ids = store.id
     n = store_ids.size
-    # (Two reductions, no temporary masks: 17 -> ~6 us for 10k ids.)
+    # (Two reductions, no temporary masks.)
     if n == 0 or ids.min() < 0 or ids.max() > int(store_ids[-1]):
         return None
     cached = store.rows_by_id
@@ -530,7 +530,7 @@ class LightStore:
         In an update, a rule runs only when one of the fields it reads was given: the
         stored rows passed every rule when they were written, so a rule over stored values
         alone cannot fail, and the first failing rule is the same as with every rule run
-        (an update of positions only was 42 us of validation for 100 lights, most of a
+        (with every rule run, validating an update of positions only was most of a
         service frame's ``update_lights``)."""
         unknown = [k for k in given if k not in LIGHT_FIELDS]
         if unknown:
@@ -752,7 +752,7 @@ class _StoredRows(dict):
     and the stored values of the rows it names for the others, read on first use. A rule
     runs only when a field it reads was given (the stored rows passed every rule when they
     were written), so an update of positions reads no other column: gathering all eleven
-    light columns took ~0.5 ms of a 0.8 ms update of 10k positions (bench/updates.py)."""
+    light columns was most of such an update (bench/updates.py)."""
 
     def __init__(self, store: Any, rows: np.ndarray, names: tuple[str, ...]) -> None:
         super().__init__()
@@ -768,8 +768,7 @@ class _StoredRows(dict):
 
 def _put_rows(dst: np.ndarray, rows: np.ndarray, src: np.ndarray) -> None:
     """dst[rows] = src. Rows of a 2-D array (positions, directions, bounds) are moved as
-    one opaque item each: numpy's row-wise fancy assignment took 2.3x as long (10k
-    positions 175 -> 76 us)."""
+    one opaque item each: numpy's row-wise fancy assignment is slower."""
     if (dst.ndim == 2 and src.dtype == dst.dtype and src.flags.c_contiguous
             and dst.flags.c_contiguous):
         row = np.dtype((np.void, dst.shape[1] * dst.itemsize))
@@ -904,7 +903,7 @@ class SceneAPI:
         Stores copy on write, so references keep most of it. The per-object state arrays a
         frame writes in place (the writeable ones; read-only ones are replaced whole) are
         copied, into buffers kept from the last transaction: a 10k-object scene with K = 8
-        copies ~1 MB (~50 us). What a subclass keeps beside the stores (last frame's
+        copies ~1 MB. What a subclass keeps beside the stores (last frame's
         shadowed set, a cache) it puts back or drops through ``_memory`` and
         ``_put_back``, so a block may also raise after its frame returned."""
         memory = self._memory()

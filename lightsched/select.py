@@ -4,7 +4,7 @@ Takes the competing lights of one object as a stream of (key, id, P, row) and ke
 of highest key, ties to the lower light id; key = P, or P + h|P| + hysteresis_abs for a light
 that was in the object's selected set last frame, so near-equal lights do not flicker in
 and out of the set. Returns the selected set in key order. The insertion is inlined into
-the object pass of pairs.py, which skips the ranking when every competing light fits in K.
+the object pass (objects.py), which skips the ranking when every competing light fits in K.
 """
 
 from __future__ import annotations

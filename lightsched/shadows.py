@@ -121,9 +121,10 @@ def _importance(j, position, radius, intensity, prio, cams, c1):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _rank(candidate, light, cams, prev, params):
     """rank_shadow_lights' work in one call on the calling thread: a frame has a few dozen
-    candidates, where the ~20 numpy calls this replaced took ~70 us and a parallel launch
-    ~20. light = (type, id, intensity, priority, position, radius); prev = (last frame's
-    ids, their tiers); params = (budget, h, h_abs, c1). Returns (rows, tiers)."""
+    candidates, too few to pay for the ~20 numpy calls this replaced (their per-call
+    overhead) or for a parallel launch. light = (type, id, intensity, priority, position,
+    radius); prev = (last frame's ids, their tiers); params = (budget, h, h_abs, c1).
+    Returns (rows, tiers)."""
     typ, ids, intensity, prio, position, radius = light
     budget, h, h_abs, c1 = int(params[0]), params[1], params[2], params[3]
     rows = np.flatnonzero(candidate)
@@ -201,7 +202,7 @@ def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
     in shadow_lights; -1 elsewhere. Fading-out slots count: the shader still samples them.
     Reads the object's new slots (F_NEW_W, I_NEW_ROW of select.py, in output order) and
     writes row o of out [N, K], which the caller has filled with -1; inlined into
-    pairs.object_pass."""
+    objects.object_pass."""
     for _ in range(max_per_object):
         best = -1
         for m in range(cnt):

@@ -1,15 +1,15 @@
 """A light's run of candidates in vector code (DESIGN section 2, "Affects" and the
 contribution model of "Priority").
 
-point_run takes a run of object records (pairs.visible_objects: [V, 8] float64, lo, hi,
+point_run takes a run of object records (grid.visible_objects: [V, 8] float64, lo, hi,
 mask bits, e2) at positions v0..v1-1 and one light's sphere and mask; it appends the hits
 (range test and mask), as (position, d2), to the light's segment of the pair buffers and
 returns the new end. After the light's whole walk, point_priority (a point light) or
 spot_priority (a spot light: the cone, then the spot factor) turn the hits into (object
-row, P) in place, under the contribution model. pairs.light_pass uses point_run for every
+row, P) in place, under the contribution model. walk.light_pass uses point_run for every
 point and spot light with float64 records, and finishes the thesis model's hits with its
 scalar code; "fast" float32 records keep the scalar loop throughout. candidate_run turns
-the lanes around for the candidate lists (pairs.candidate_pairs): one object against eight
+the lanes around for the candidate lists (candidates.candidate_pairs): one object against eight
 of its candidate lights a step, each light's 64-byte row of light_hot loaded whole and
 transposed as the objects' records are here, the same rule and operations lane by lane.
 The stream kernels do the same for a whole chunk of objects with the lanes filled across
@@ -17,7 +17,7 @@ objects: stream_fill lays their candidates end to end as (light row, object row)
 stream_run tests eight entries a step (each lane's object record loaded and transposed as
 its light's row is) and lists the spot lights in range, stream_spots takes those eight a
 step through the cone, stream_pack packs the pairs by object. held_row takes the object
-pass's common case (pairs.object_pass: slots that hold the object's selection, still in
+pass's common case (objects.object_pass: slots that hold the object's selection, still in
 last frame's order) with its pairs in the lanes, and writes each of the object's output
 rows with one store.
 
@@ -276,7 +276,7 @@ class _Run:
 
     def cone(self, f: list[ir.Value], spot: list[ir.Value]) -> tuple[ir.Value, ir.Value]:
         """(meets, s) per lane of the spot and the records' fields f: priority.spot_cone
-        on the bounding sphere of pairs._geometry, the same operations in the same order;
+        on the bounding sphere of priority.record_geometry, the same operations in the same order;
         spot = (axis x, y, z, cos o, sin o, cos inner or NaN) as vectors."""
         b = self.b
         two = ir.Constant(_VF, [2.0] * LANES)
@@ -507,7 +507,7 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
     """The pairs of object row o (record o of ``box``, [N, 8] float64) with its candidate
     lights c_j[a:b] (point and spot rows of hot / lf, light_hot and light_f: [L, 8] float64
     each), appended from m to out_p (P) / out_j (light row), in candidate order; returns
-    the new end. The rule of pairs.candidate_pairs' scalar loop under the contribution
+    the new end. The rule of candidates.candidate_pairs' scalar loop under the contribution
     model, bit for bit: a light that competes (``compete``, bool [L]) with a mask bit of
     the object's, d2 <= r*r (priority.box_d2), for a spot the cone (priority.spot_cone on
     the bounding sphere), P = falloff * s + p_user (s = 1 for a point light: the same bits
@@ -515,8 +515,8 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
     object (its fields in every lane), where point_run has eight objects against one
     light: each light's record is one 64-byte row, loaded whole and transposed like the
     objects' records; light_f rows only for the spot lanes that passed the range test
-    (masked loads: at (1M, 100k), where the light rows leave L2, reading every lane's
-    took 67.6 ms against 49.4). For float32 records ("fast") returns -1 at once: the caller
+    (masked loads: where the light rows leave L2, as at (1M, 100k), every lane's row read
+    is a cache miss). For float32 records ("fast") returns -1 at once: the caller
     runs its scalar loop. The caller guarantees the object has a mask bit (its record's
     mask has a SHOWN bit) and the room: at most one pair per candidate."""
     if not _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j):
@@ -621,7 +621,7 @@ def _records(ty) -> bool:
     return _array_of(ty, types.float64, 2) or _array_of(ty, types.float32, 2)
 
 
-# The candidates' stream (pairs.candidate_pairs): per entry the light row and the object
+# The candidates' stream (candidates.candidate_pairs): per entry the light row and the object
 # row (int32 each); its results: P (float64) and whether the pair affects (uint8).
 _STREAM = ((types.int32, 1), (types.int32, 1))
 _STREAM_OUT = ((types.float64, 1), (types.uint8, 1))
@@ -705,9 +705,9 @@ def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
     belongs to: candidate_run's rule lane by lane, with the object's record loaded and
     transposed per lane as the light's row is. The light rows of the entries STREAM_AHEAD
     on are prefetched: they are rows at random, and at (1M, 100k), where light_hot is 6.4
-    MB, half of the pass's samples waited on them (bench/kernel_profile.py; on captured
-    inputs -0.3..-5 ms of 24..40, the more the slower the machine's memory was that hour;
-    at (100k, 10k) -0.13..-0.2 ms of 2.4, at (10k, 1k) nothing).
+    MB, half of the pass's samples waited on them (bench/kernel_profile.py). The prefetch
+    helps the more the slower the memory, and not where the lights stay cached
+    (bench/RESULTS.md, "Measurements behind the code").
 
     A point light's pair gets out = (P, 1); a pair that fails gets hit 0; a spot light in
     range gets hit 0 here and its entry's index appended to ``spots`` (stream_spots decides
@@ -827,7 +827,7 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
     """The pairs among the stream's first n entries (out's hit set) packed, in stream
     order, into heap = (P, light row) from ``base``: a compress store of eight entries a
     step. before[i] = the pairs before entry i (before[n]: all), from which each object's
-    segment follows (pairs.candidate_pairs). Returns the pairs."""
+    segment follows (candidates.candidate_pairs). Returns the pairs."""
     if not (_arrays_of(stream, _STREAM) and _arrays_of(out, _STREAM_OUT)
             and _arrays_of(heap, ((types.float64, 1), (types.int32, 1)))
             and _array_of(before, types.int64, 1)):
@@ -878,7 +878,7 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
 
 
 # The dtypes held_row reads and writes: heap (P, light row), lights (live_id), state
-# (slot ids, slot weights, slot states, selection), out (pairs.object_pass's nine) and
+# (slot ids, slot weights, slot states, selection), out (objects.object_pass's nine) and
 # rules (map index per light row; the others are checked by kind), as the scheduler
 # passes them.
 _HELD_TYPES = (
@@ -922,7 +922,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     in pair order, or by key), slot_shadow (pick_slot_shadows: at most ``rules[1]``
     slots whose light has a map, by weight, then output order) and the fading flag, and
     returns the number of competing lights (the count is that, at most K). Arguments as
-    pairs.object_pass has them (heap = (P, light row), lights = (live_id,): by light row
+    objects.object_pass has them (heap = (P, light row), lights = (live_id,): by light row
     its id when live, else -2; state, out) and rules = (map index per light row, how
     many slots may take one: 0 when no light has a map, h, hysteresis_abs, dt/fade_in,
     fade_in); K = 8 (the caller checks). For arrays of other dtypes or layouts (none the
@@ -933,9 +933,8 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
     selected ids compared with the old slots, which both checks that they are the same
     set and carries each pair's P, row and key to its old slot; one compare of each slot
     with the next checks the order, and each output row is one vector store. (A sorting
-    network of the eight lanes instead, 6 layers of compare-exchange on (P, id): ~40 ns
-    an object more on this machine, the chain of mask operations, against ~35 ns for the
-    whole of the first case.)"""
+    network of the eight lanes instead, 6 layers of compare-exchange on (P, id), cost
+    more than the whole of the first case: a chain of mask operations.)"""
     groups = (heap, lights, state, out, rules)
     if not (all(isinstance(t, types.BaseTuple) for t in groups)
             and tuple(len(g) for g in groups) == tuple(len(w) for w in _HELD_TYPES)

@@ -1,7 +1,7 @@
 """Tuning: the thresholds and margins by which a frame's plan chooses its paths (DESIGN
 section 6). None of them changes a result, only how it is found; the tests pass their own
 Tuning to force each path on small scenes. Where each value comes from (the measurements)
-is in bench/RESULTS.md, "Tuning".
+is in bench/RESULTS.md, "Tuning (lightsched/tuning.py)".
 
 Constants that numba compiles into the kernels (work-item sizes, the grid's z split, the K
 values with a static trip count) stay module constants of their kernels' modules: a kernel

@@ -23,7 +23,15 @@ import numpy as np
 from .frustum import SERIAL_LIGHTS
 from .grid import _axis_cells, _cell
 from .jit import PRANGE_ONLY
-from .priority import MODEL_CONTRIBUTION, box_d2, record_geometry, record_pair_p, spot_cone
+from .priority import (
+    MODEL_CONTRIBUTION,
+    PackedLights,
+    PairParams,
+    box_d2,
+    record_geometry,
+    record_pair_p,
+    spot_cone,
+)
 from .scene import DIRECTIONAL, POINT, SPOT
 from .simd import point_priority, point_run, prefetch_row, spot_priority
 
@@ -43,11 +51,11 @@ class LightPairs(NamedTuple):
     p: np.ndarray
 
 
-def walk_lights(lights: tuple[np.ndarray, np.ndarray], rows: np.ndarray, grid: Grid,
-                params: np.ndarray, buffers: Buffers, name: str) -> LightPairs:
+def walk_lights(lights: PackedLights, rows: np.ndarray, grid: Grid,
+                params: PairParams, buffers: Buffers, name: str) -> LightPairs:
     """Affects and P of the lights ``rows`` (packed ``lights``) against the objects of
     ``grid`` (light_bounds, light_pass), into the scratch buffers ``name``_obj and _p."""
-    offsets = light_bounds(lights[0], rows, grid.index, grid.records[0].shape[0])
+    offsets = light_bounds(lights[0], rows, grid.index, grid.records.box.shape[0])
     pair_obj = buffers.scratch(name + "_obj", int(offsets[-1]), np.int32)
     pair_p = buffers.scratch(name + "_p", int(offsets[-1]), np.float64)
     count = light_pass(lights, rows, grid.index, grid.records, offsets, pair_obj, pair_p,
@@ -110,6 +118,36 @@ def _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def light_runs(hot, j, g_f, dims, cell_start, ext, runs):
+    """The grid walk (DESIGN section 8, the object grid): the runs of grid positions
+    [runs[i, 0], runs[i, 1]) holding the objects centred in the cells that point or spot
+    light j's sphere can reach, column by column (_column_run), empty columns left out.
+    The one walk of the light pass, affects_any and casters.grid_casters; the objects
+    larger than a cell (big_pos) are not in any run.
+
+    hot: packed light rows (priority.pack); j: the light's row; g_f, dims, cell_start,
+    ext: the grid's GridIndex fields; runs: int64 [R, 2] scratch. Returns (number of runs,
+    runs, regrown when short)."""
+    c = _light_cells(hot, j, g_f, dims, ext)
+    columns = max(c[3] - c[0] + 1, 0) * max(c[4] - c[1] + 1, 0)
+    if columns > runs.shape[0]:
+        runs = np.empty((columns, 2), np.int64)
+    rr = _reach2(hot, j)
+    m = 0
+    for x in range(c[0], c[3] + 1):
+        dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
+        if dxx > rr:
+            continue
+        for y in range(c[1], c[4] + 1):
+            v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
+            if v1 > v0:
+                runs[m, 0] = v0
+                runs[m, 1] = v1
+                m += 1
+    return m, runs
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _light_bound(hot, j, g_f, dims, cell_start, ext, n_big, n_vis):
     if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
         return n_vis
@@ -128,7 +166,8 @@ def light_bounds(hot, rows, grid, n_vis):
     """Offsets [len(rows) + 1] of each light's segment in the pair buffers: the prefix sum
     of an upper bound of the pairs it can emit (objects centred in the cells of its
     widened cube plus the big objects; every visible object for a directional light).
-    Parallel from SERIAL_LIGHTS lights."""
+    hot: PackedLights.hot; grid: GridIndex; n_vis: the grid's object count. Parallel from
+    SERIAL_LIGHTS lights."""
     g_f, dims, cell_start, ext, big_pos = grid
     n_big = big_pos.shape[0]
     out = np.zeros(rows.shape[0], np.int64)
@@ -165,15 +204,16 @@ def _exact_pair(hot, lf, j, lm, typ, v, d2, vis_box, vis_bits, vis_rows, pair_ob
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
-    """For each light in ``rows`` (parallel), its affecting pairs with visible objects:
-    pair_obj / pair_p [offsets[t] : offsets[t] + count[t]] = (object row, P).
+    """For each light in ``rows`` (parallel), its pairs with the grid's objects (DESIGN
+    section 2, "Affects" and "Priority"; section 8, the object grid): pair_obj / pair_p
+    [offsets[t] : offsets[t] + count[t]] = (object row, P).
 
-    lights = (light_hot, light_f); grid = (origin and 1/h, dims, cell_start, ext,
-    big_pos); vis = (vis_box, vis_bits, vis_rows); params = (model, w_obj,
-    w_int). Returns count per light."""
-    model = int(params[0])
-    w_obj = params[1]
-    w_int = params[2]
+    lights: PackedLights; rows: light rows, in grid order (grid.light_order); grid:
+    GridIndex; vis: the grid's Records; offsets: light_bounds; pair_obj int32, pair_p
+    float64: the pair buffers; params: PairParams. Returns count per light."""
+    model = params.model
+    w_obj = params.w_obj
+    w_int = params.w_int
     # Unpacked once: a tuple of arrays unpacked in the loop (once a light, in a helper)
     # keeps its reference counting there, atomic operations on counts both threads share.
     hot, lf = lights
@@ -184,6 +224,7 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
     n_chunks = (rows.shape[0] + LIGHT_CHUNK - 1) // LIGHT_CHUNK
     for ch in nb.prange(n_chunks):
         keep = (np.empty(256, np.int32), np.empty(256))
+        runs = np.empty((64, 2), np.int64)
         for t in range(ch * LIGHT_CHUNK, min(rows.shape[0], (ch + 1) * LIGHT_CHUNK)):
             if t + 1 < rows.shape[0]:
                 prefetch_row(hot, rows[t + 1])
@@ -202,19 +243,11 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
                         n += 1
                 count[t] = n - offsets[t]
                 continue
-            c = _light_cells(hot, j, g_f, dims, ext)
-            rr = _reach2(hot, j)
-            for x in range(c[0], c[3] + 1):
-                dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-                if dxx > rr:
-                    continue
-                for y in range(c[1], c[4] + 1):
-                    # The objects centred in a column of cells are one run of positions.
-                    v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
-                    if v1 > v0:
-                        n, keep = _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits,
-                                             vis_rows, pair_obj, pair_p, n, keep, model, w_obj,
-                                             w_int)
+            m, runs = light_runs(hot, j, g_f, dims, cell_start, ext, runs)
+            for i in range(m):
+                n, keep = _run_pairs(runs[i, 0], runs[i, 1], hot, lf, j, lm, typ, vis_box,
+                                     vis_bits, vis_rows, pair_obj, pair_p, n, keep, model, w_obj,
+                                     w_int)
             if vis_box.itemsize == 8:
                 # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
                 if typ == POINT and model == MODEL_CONTRIBUTION:
@@ -298,7 +331,8 @@ def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_ob
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def affects_any(lights, rows, grid, vis):
     """Per light of ``rows`` (parallel): whether it affects at least one object of the grid
-    (DESIGN "Affects": mask, range, cone), stopping at the first hit. An incremental frame
+    (DESIGN section 2, "Affects": mask, range, cone), stopping at the first hit. lights:
+    PackedLights; grid: GridIndex; vis: the grid's Records. An incremental frame
     asks this of its shadowed lights, the shadow ranking's candidates, instead of walking
     every light."""
     hot, lf = lights
@@ -317,20 +351,14 @@ def affects_any(lights, rows, grid, vis):
                     break
             out[t] = hit
             continue
-        c = _light_cells(hot, j, g_f, dims, ext)
-        rr = _reach2(hot, j)
-        for x in range(c[0], c[3] + 1):
-            dxx = _slab_d2(hot[j, 0], x, g_f[0], 1.0 / g_f[3], dims[0], ext[0])
-            if hit or dxx > rr:
-                continue
-            for y in range(c[1], c[4] + 1):
-                if hit:
+        m, runs = light_runs(hot, j, g_f, dims, cell_start, ext, np.empty((16, 2), np.int64))
+        for i in range(m):
+            for v in range(runs[i, 0], runs[i, 1]):
+                if _affects(hot, lf, j, lm, typ, v, vis_box, vis_bits):
+                    hit = True
                     break
-                v0, v1 = _column_run(hot, j, c, x, y, dxx, rr, g_f, dims, cell_start, ext)
-                for v in range(v0, v1):
-                    if _affects(hot, lf, j, lm, typ, v, vis_box, vis_bits):
-                        hit = True
-                        break
+            if hit:
+                break
         for b in range(big_pos.shape[0]):
             if hit:
                 break

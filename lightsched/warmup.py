@@ -1,7 +1,7 @@
 """Every kernel signature a frame can call, made ready before the first frame needs it.
 
 Takes: the K values and precisions to prepare (by default every compiled variant: K in
-pairs.STATIC_K and one other K, exact and fast). Returns: a ``WarmUp`` summary (seconds,
+objects.STATIC_K and one other K, exact and fast). Returns: a ``WarmUp`` summary (seconds,
 kernel signatures loaded from numba's cache and compiled).
 
 numba compiles a kernel for each new signature on its first call and keeps the machine
@@ -39,7 +39,7 @@ from .scenes import city, move_lights
 from .scheduler import Scheduler
 from .tuning import Tuning
 
-# A K compiled without a static trip count (pairs.object_pass): any K not in STATIC_K.
+# A K compiled without a static trip count (objects.object_pass): any K not in STATIC_K.
 GENERIC_K = next(k for k in range(2, 64) if k not in STATIC_K)
 
 

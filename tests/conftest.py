@@ -14,7 +14,7 @@ import pytest
 
 
 def _drop_stale_numba_cache() -> None:
-    """numba keys a cached kernel on its own source file only, so a kernel of pairs.py that
+    """numba keys a cached kernel on its own source file only, so a kernel of objects.py that
     inlines fade.py, select.py or simd.py keeps running the old helpers after they are
     edited (a mutation of fade.py passed the oracle tests that way). The cache is dropped
     whenever any source of the package changed since it was written; the digest sits

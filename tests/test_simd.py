@@ -25,8 +25,15 @@ from lightsched.candidates import candidate_pairs
 from lightsched.candidates import scalar_candidates as pairs_scalar
 from lightsched.grid import visible_objects
 from lightsched.jit import OBJECT_CHUNK, PRANGE_ONLY
-from lightsched.objects import live_ids, object_pass
-from lightsched.priority import MODEL_CONTRIBUTION, box_d2, falloff
+from lightsched.objects import (
+    FadeParams,
+    ObjectOutputs,
+    SlotShadows,
+    SlotState,
+    live_ids,
+    object_pass,
+)
+from lightsched.priority import MODEL_CONTRIBUTION, PairParams, box_d2, falloff
 from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
 from lightsched.walk import _finish_hits
 
@@ -173,14 +180,16 @@ def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0
     kinds = [obj[0] for obj in objects]
     visible = np.array([kind != "hidden" for kind in kinds])
     reset = np.array([kind == "reset" for kind in kinds])
-    out = (np.full((n, k), -9, np.int32), np.full((n, k), -9, np.int32),
-           np.full((n, k), -9.0, np.float32), np.full((n, k), -9.0, np.float32),
-           np.full((n, k), 9, np.uint8), np.full(n, -9, np.int32), np.full(n, -9, np.int32),
-           np.full((n, k), -9, np.int8), np.ones(n, np.bool_))
-    params = np.array([0.1, 0.05, 0.25 if fade_in else 1.0, 0.25, fade_in, 0.2])
+    out = ObjectOutputs(np.full((n, k), -9, np.int32), np.full((n, k), -9, np.int32),
+                        np.full((n, k), -9.0, np.float32), np.full((n, k), -9.0, np.float32),
+                        np.full((n, k), 9, np.uint8), np.full(n, -9, np.int32),
+                        np.full(n, -9, np.int32), np.full((n, k), -9, np.int8),
+                        np.ones(n, np.bool_))
+    params = FadeParams(0.1, 0.05, 0.25 if fade_in else 1.0, 0.25, float(fade_in), 0.2)
     heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
     return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), live_id,
-            (s_id, s_w, s_st, s_sel), out, params, (shadow_of_row, np.int64(max_shadowed)),
+            SlotState(s_id, s_w, s_st, s_sel), out, params,
+            SlotShadows(shadow_of_row, int(max_shadowed)),
             (0,) * k)
 
 
@@ -422,7 +431,7 @@ def scalar_candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
     """candidates.scalar_candidates (candidate_pairs' scalar loop) for one object under the
     contribution model, with candidate_run's arguments."""
     return pairs_scalar(box, np.int64(box.view(np.int64)[o, 6]), o, (hot, lf), compete, c_j,
-                        a, b, (out_p, out_j), m, np.array([MODEL_CONTRIBUTION, 0.0, 0.0]))
+                        a, b, (out_p, out_j), m, PairParams(MODEL_CONTRIBUTION, 0.0, 0.0))
 
 
 @st.composite
@@ -596,7 +605,7 @@ def check_stream(rng, n, n_l):
     for dtype in (np.float64, np.float32):
         cands, recs, lights, compete = candidate_scene(rng, n, n_l, dtype)
         seg, c_j = cands
-        params = np.array([MODEL_CONTRIBUTION, 0.0, 0.0])
+        params = PairParams(MODEL_CONTRIBUTION, 0.0, 0.0)
         some = np.flatnonzero(rng.uniform(size=n) < 0.4)
         for which, used in ((np.arange(n), 0), (some, 5), (some[:0], 3)):
             room = used + int(seg[which, 1].sum())
