@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test run lint bench bench-quick clean
+.PHONY: test test-quick run lint bench bench-quick clean
 
 # The root distribution ships lightsched_client too (the server's wire codec): a venv made
 # before it did has the client's own distribution as well, which is dropped so that only one
@@ -21,7 +21,13 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 -q --durations=15
+
+# A few minutes instead of the suite's ~20 (2 cores, numba's cache warm): a tenth of the
+# hypothesis examples, and without the tests marked slow (servers, browsers, long
+# sequences). Every rule still has its oracle test; `make test` is what CI runs.
+test-quick: $(STAMP) lint
+	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow" --durations=10
 
 run: $(STAMP)
 	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
