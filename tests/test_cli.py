@@ -6,6 +6,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 
 def test_demo_runs_and_prints_a_summary():
     proc = subprocess.run(
@@ -36,6 +38,7 @@ def test_serve_help_explains_the_options():
         assert word in proc.stdout, proc.stdout
 
 
+@pytest.mark.slow  # a child process that warms every kernel up
 def test_warm_up_prepares_the_kernels_asked_for():
     proc = subprocess.run([sys.executable, "-m", "lightsched", "warm-up", "--max-lights", "8",
                            "--precision", "exact"], capture_output=True, text=True, timeout=900)
@@ -53,6 +56,7 @@ def test_warm_up_rejects_an_unknown_precision():
     assert proc.returncode == 2 and "--precision" in proc.stderr
 
 
+@pytest.mark.slow  # a child process that warms every kernel up
 def test_serve_then_a_client_drives_the_demo_session():
     """`make run`'s command in a process of its own; the Python client drives the preloaded
     demo session and a new one from this process, as a second shell would."""

@@ -778,6 +778,7 @@ print("ok")
 """
 
 
+@pytest.mark.slow  # compiles the kernels again, into an empty cache
 def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
     """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
     packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run,

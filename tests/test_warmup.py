@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import lightsched as ls
 from lightsched.frame import PER_OBJECT, changed_rows
@@ -104,6 +105,7 @@ def _battery() -> dict[str, int]:
             if len(d.signatures) != before.get(name, 0)}
 
 
+@pytest.mark.slow  # warms every K variant and precision up
 def test_no_frame_compiles_after_warm_up():
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve())],
                           capture_output=True, text=True, timeout=1800)
@@ -112,6 +114,7 @@ def test_no_frame_compiles_after_warm_up():
     assert grown == {}, f"kernels compiled after warm_up: {grown}"
 
 
+@pytest.mark.slow  # warms every K variant and precision up
 def test_warm_up_twice_loads_nothing_the_second_time():
     warm_up(max_lights=(8,), precisions=("exact",))
     again = warm_up(max_lights=(8,), precisions=("exact",))
