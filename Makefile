@@ -23,9 +23,10 @@ lint: $(STAMP)
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -n 2 -q --durations=15
 
-# A few minutes instead of the suite's ~20 (2 cores, numba's cache warm): a tenth of the
-# hypothesis examples, and without the tests marked slow (servers, browsers, long
-# sequences). Every rule still has its oracle test; `make test` is what CI runs.
+# ~3 minutes on 2 cores with numba's cache warm (the full suite takes ~20): a tenth of the
+# hypothesis examples, and without the tests marked slow (those that compile or warm up
+# every kernel in a child process). Every module still meets the oracle; `make test` is
+# what CI runs.
 test-quick: $(STAMP) lint
 	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow" --durations=10
 
