@@ -2,6 +2,7 @@
 
     python bench/paired.py --base HEAD~1                          # full and lights10 at 100k
     python bench/paired.py --base fdf791a --sizes 1M:100k --scenarios all --frames 10
+    python bench/paired.py --base 41b6ba6 --new 8008441 --first base    # two commits
 
 The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
 and the working tree's copied, and both are imported under other names
@@ -83,6 +84,14 @@ def copy_worktree(workdir: Path) -> Path:
     return dest
 
 
+def new_side(commit: str | None, workdir: Path, copy: bool) -> Path:
+    """The folder of the new side's lightsched/: the working tree's copy (``copy``: made
+    now), or ``commit`` extracted in a folder of its own (so it may equal the base)."""
+    if commit is None:
+        return copy_worktree(workdir) if copy else workdir / "worktree"
+    return extract(resolve(commit), workdir / "new")
+
+
 def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
            seed: int, object_ids: str = "random") -> dict[str, Any]:
     """Frames of both sides alternated; per side the frame times and stage seconds."""
@@ -128,6 +137,8 @@ def stage_moves(r: dict[str, Any], top: int = 3) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", required=True, help="the commit to compare the working tree with")
+    p.add_argument("--new", default=None,
+                   help="a commit to take the working tree's place (default: the working tree)")
     p.add_argument("--sizes", default="100k:10k", help="N:L pairs (default 100k:10k)")
     p.add_argument("--scenarios", default="full,lights10",
                    help="bench/core.py scenarios (default full,lights10)")
@@ -144,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
                         "service does (a child process compiles them first, writing their "
                         "caches); the others compile in this process (default none; the "
                         "module docstring says why the two differ)")
+    p.add_argument("--first", choices=["new", "base"], default="new",
+                   help="the side imported, compiled and given its Scheduler first (default "
+                        "new): swapping it shows what the order alone does")
     p.add_argument("--prime", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     base = resolve(args.base)
@@ -156,12 +170,13 @@ def main(argv: list[str] | None = None) -> int:
             rest = list(sys.argv[1:] if argv is None else argv)
             subprocess.run([sys.executable, __file__, *rest, "--prime", "--workdir",
                             str(workdir)], check=True)
-            paths = {"new": workdir / "worktree", "base": extract(base, workdir)}
+            paths = {"new": new_side(args.new, workdir, copy=False), "base": extract(base, workdir)}
         else:
-            paths = {"new": copy_worktree(workdir), "base": extract(base, workdir)}
+            paths = {"new": new_side(args.new, workdir, copy=True), "base": extract(base, workdir)}
+        order = ("new", "base") if args.first == "new" else ("base", "new")
         packages = {side: load_package(paths[side], "lightsched_" + side,
                                        fresh=args.prime or not cached[side])
-                    for side in ("new", "base")}
+                    for side in order}
         if args.prime:
             # Every kernel and signature the timed run will call, compiled and cached (some
             # arrays turn read-only, a signature of their own, after the first frames).
@@ -177,9 +192,11 @@ def main(argv: list[str] | None = None) -> int:
                     importlib.import_module(pkg.__name__ + ".warmup").warm_up()
             return 0
         m = machine()
-        say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); working tree "
-            f"{git_commit()} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
-            f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}")
+        new = git_commit() if args.new is None else resolve(args.new)["sha"][:7]
+        say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); new side "
+            f"{new} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
+            f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}; "
+            f"first side: {args.first}")
         say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
             "| mean difference ms | stages that moved most (base -> working tree, ms) |")
         say("|---|---|---|---|---|---|---|---|")
