@@ -498,31 +498,80 @@ class Scheduler(SceneAPI):
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()
         cfg = self.config
-        k_max = cfg.max_lights
         cams = [CameraFrame(c) for c in cameras]
         lights = _read_lights(self.lights)
         objects = _read_objects(self.objects)
         is_new = [bool(x) for x in self.objects.is_new]
-        first = self.frame_index == 0
+        restart = self.frame_index == 0 or cut
 
         # Fade state follows ids; ids gone from the store lose it.
         live = {ob.id for ob in objects}
         self._state = {oid: st for oid, st in self._state.items() if oid in live}
 
-        # Visibility.
-        light_visible = []
-        for lt in lights:
-            if lt.type == DIRECTIONAL:
-                light_visible.append(True)
-            else:
-                light_visible.append(any(ball_in_planes(cam.planes, lt.position, lt.radius)
-                                         for cam in cams))
-        object_visible = [any(aabb_in_planes(cam.planes, ob.lo, ob.hi) for cam in cams)
-                          for ob in objects]
+        light_visible, object_visible = _visibility(lights, objects, cams)
+        shadow_ids, tiers = self._shadow_lights(lights, objects, cams, light_visible,
+                                                object_visible)
+        shadow_index = {lid: k for k, lid in enumerate(shadow_ids)}
+        # With "skip", a shadowed light that did not get a shadow map affects nothing.
+        skipped = [cfg.unshadowed == "skip" and lt.shadows and lt.id not in shadow_index
+                   for lt in lights]
+        competing = [lt for lt in lights if light_visible[lt.row] and not skipped[lt.row]]
 
-        # Shadowed lights: visible, shadows = true, affecting a visible object (Affects
-        # without the unshadowed rule); ranked by importance with hysteresis, directional
-        # lights first.
+        frame = empty_frame(self.objects.id, cfg.max_lights, cfg.cascades)
+        row_of = {lt.id: lt.row for lt in lights}
+        pairs = 0
+        for ob in objects:
+            st = self._state.get(ob.id)
+            new = is_new[ob.row] or st is None
+            if new:
+                st = self._state[ob.id] = _ObjectState()
+            prev_selected = st.selected if st.visible and not new else set()
+            if not object_visible[ob.row]:
+                st.slots, st.selected, st.visible = [], set(), False
+                continue
+            frame.visible[ob.row] = True
+            prio = _priorities(competing, ob, cams, cfg)
+            frame.candidates[ob.row] = len(prio)
+            pairs += len(prio)
+            selected = _select(prio, prev_selected, cfg)
+            if new or not st.visible or restart:
+                st.slots = [[lid, 1.0, ON] for lid in selected]
+            else:
+                st.slots = _fade(st.slots, prio, selected, dt, cfg)
+            st.selected = set(selected)
+            st.visible = True
+            _write_object(frame, ob.row, st.slots, prio, row_of, shadow_index, cfg)
+
+        directional = {lt.id: lt.intensity + lt.p_user for lt in lights
+                       if lt.type == DIRECTIONAL and not skipped[lt.row]}
+        frame.directional_lights = np.array(
+            [] if cfg.directional_in_slots else _by_priority(directional), dtype=np.int32)
+        frame.shadow_lights = np.array(shadow_ids, dtype=np.int32)
+        frame.shadow_tier = np.array(tiers, dtype=np.uint16)
+        _write_casters(frame, lights, objects, shadow_ids, cams, cfg)
+        frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
+                                        dtype=np.int32)
+        frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],
+                                        dtype=np.float64).reshape(len(cams), cfg.cascades + 1)
+        frame.stats = {
+            "plan": {"all": "reference"},
+            "counts": {
+                "visible_objects": int(sum(object_visible)),
+                "visible_lights": int(sum(light_visible)),
+                "pairs": pairs,
+            },
+            "seconds": {"total": time.perf_counter() - t0},
+        }
+        return freeze(frame)
+
+    def _shadow_lights(self, lights: list[_Light], objects: list[_Object],
+                       cams: list[CameraFrame], light_visible: list[bool],
+                       object_visible: list[bool]) -> tuple[list[int], list[int]]:
+        """Shadowed lights (DESIGN section 2, "Shadowed lights"): visible, shadows = true,
+        affecting a visible object (Affects without the unshadowed rule); ranked by
+        importance with hysteresis, directional lights first; their ids and tiers, which
+        the next frame's hysteresis remembers."""
+        cfg = self.config
         h = cfg.hysteresis
         keys_dir: dict[int, float] = {}
         keys_other: dict[int, float] = {}
@@ -554,148 +603,129 @@ class Scheduler(SceneAPI):
                 tier = prev
             tiers.append(tier)
         self._shadowed = dict(zip(shadow_ids, tiers, strict=True))
-        shadow_index = {lid: k for k, lid in enumerate(shadow_ids)}
-        # With "skip", a shadowed light that did not get a shadow map affects nothing.
-        skipped = [cfg.unshadowed == "skip" and lt.shadows and lt.id not in shadow_index
-                   for lt in lights]
+        return shadow_ids, tiers
 
-        directional = {}
-        if not cfg.directional_in_slots:
-            for lt in lights:
-                if lt.type == DIRECTIONAL and not skipped[lt.row]:
-                    directional[lt.id] = lt.intensity + lt.p_user
-        directional_ids = _by_priority(directional)
 
-        frame = empty_frame(self.objects.id, k_max, cfg.cascades)
-        row_of = {lt.id: lt.row for lt in lights}
-        pairs = 0
-        for ob in objects:
-            st = self._state.get(ob.id)
-            new = is_new[ob.row] or st is None
-            if new:
-                st = self._state[ob.id] = _ObjectState()
-            prev_visible = st.visible and not new
-            prev_selected = st.selected if prev_visible else set()
-            if not object_visible[ob.row]:
-                st.slots = []
-                st.selected = set()
-                st.visible = False
+def _visibility(lights: list[_Light], objects: list[_Object], cams: list[CameraFrame]
+                ) -> tuple[list[bool], list[bool]]:
+    """DESIGN section 2, "Visibility": per light row and per object row."""
+    light_visible = [lt.type == DIRECTIONAL
+                     or any(ball_in_planes(cam.planes, lt.position, lt.radius) for cam in cams)
+                     for lt in lights]
+    object_visible = [any(aabb_in_planes(cam.planes, ob.lo, ob.hi) for cam in cams)
+                      for ob in objects]
+    return light_visible, object_visible
+
+
+def _priorities(competing: list[_Light], ob: _Object, cams: list[CameraFrame],
+                cfg: Config) -> dict[int, float]:
+    """P of every light of ``competing`` (visible, not skipped) that competes for a slot of
+    ``ob`` and affects it (DESIGN section 2, "Slots", "Affects" and "Priority")."""
+    prio: dict[int, float] = {}
+    for lt in competing:
+        if not lt.mask & ob.mask:
+            continue
+        if lt.type == DIRECTIONAL:
+            if cfg.directional_in_slots:
+                prio[lt.id] = lt.intensity + lt.p_user
+            continue
+        d2 = affects_geometry(lt, ob)
+        if d2 is None:
+            continue
+        if cfg.model == "contribution":
+            prio[lt.id] = contribution_priority(lt, ob, d2)
+        else:
+            prio[lt.id] = thesis_priority(lt, ob, cams, cfg)
+    return prio
+
+
+def _select(prio: dict[int, float], prev_selected: set[int], cfg: Config) -> list[int]:
+    """DESIGN section 2, "Selection": the K lights of highest key, last frame's selection
+    raised by the hysteresis."""
+    key = {}
+    for lid, p in prio.items():
+        if lid in prev_selected:
+            key[lid] = p + cfg.hysteresis * abs(p) + cfg.hysteresis_abs
+        else:
+            key[lid] = p
+    return _by_priority(key)[:cfg.max_lights]
+
+
+def _fade(slots: list[list[Any]], prio: dict[int, float], selected: list[int], dt: float,
+          cfg: Config) -> list[list[Any]]:
+    """DESIGN section 2, "Fade": last frame's slots stepped, then the selected lights
+    without a slot take the free ones, by P."""
+    selected_set = set(selected)
+    out = []
+    for lid, weight, state in slots:
+        if lid not in prio:
+            continue  # no longer affects: freed at once
+        if lid in selected_set:
+            if state != ON:
+                state = FADING_IN
+                weight = 1.0 if cfg.fade_in == 0 else weight + dt / cfg.fade_in
+                if weight >= 1 - EPS:
+                    weight, state = 1.0, ON
+            out.append([lid, weight, state])
+        else:
+            if cfg.fade_out == 0:
                 continue
-            frame.visible[ob.row] = True
+            weight = weight - dt / cfg.fade_out
+            if weight <= EPS:
+                continue
+            out.append([lid, weight, FADING_OUT])
+    held = {s[0] for s in out}
+    waiting = _by_priority({lid: prio[lid] for lid in selected if lid not in held})
+    for lid in waiting[:cfg.max_lights - len(out)]:
+        weight = 1.0 if cfg.fade_in == 0 else min(1.0, dt / cfg.fade_in)
+        state = FADING_IN
+        if weight >= 1 - EPS:
+            weight, state = 1.0, ON
+        out.append([lid, weight, state])
+    return out
 
-            # Affects and P of every slot-competing light.
-            prio: dict[int, float] = {}
-            for lt in lights:
-                if not light_visible[lt.row] or skipped[lt.row] or not lt.mask & ob.mask:
-                    continue
-                if lt.type == DIRECTIONAL:
-                    if cfg.directional_in_slots:
-                        prio[lt.id] = lt.intensity + lt.p_user
-                    continue
-                d2 = affects_geometry(lt, ob)
-                if d2 is None:
-                    continue
-                if cfg.model == "contribution":
-                    prio[lt.id] = contribution_priority(lt, ob, d2)
-                else:
-                    prio[lt.id] = thesis_priority(lt, ob, cams, cfg)
-            frame.candidates[ob.row] = len(prio)
-            pairs += len(prio)
 
-            # Selection with hysteresis.
-            key = {}
-            for lid, p in prio.items():
-                if lid in prev_selected:
-                    key[lid] = p + cfg.hysteresis * abs(p) + cfg.hysteresis_abs
-                else:
-                    key[lid] = p
-            selected = _by_priority(key)[:k_max]
-            selected_set = set(selected)
+def _write_object(frame: Any, row: int, slots: list[list[Any]], prio: dict[int, float],
+                  row_of: dict[int, int], shadow_index: dict[int, int], cfg: Config) -> None:
+    """Object ``row``'s outputs (DESIGN section 3): its slots in output order, then
+    slot_shadow."""
+    lit = [s for s in slots if s[2] != FADING_OUT]
+    out = [s for s in slots if s[2] == FADING_OUT]
+    lit.sort(key=lambda s: (-prio[s[0]], s[0]))
+    out.sort(key=lambda s: (-s[1], s[0]))
+    ordered = lit + out
+    frame.count[row] = len(ordered)
+    # slot_shadow: up to max_shadowed_per_object shadowed slots, by weight, then output
+    # order (fading-out slots still sample their map).
+    shadowed = [(-w, j) for j, (lid, w, _) in enumerate(ordered) if lid in shadow_index]
+    for _, j in sorted(shadowed)[:cfg.max_shadowed_per_object]:
+        frame.slot_shadow[row, j] = shadow_index[ordered[j][0]]
+    for j, (lid, weight, state) in enumerate(ordered):
+        frame.light_ids[row, j] = lid
+        frame.light_index[row, j] = row_of[lid]
+        frame.priority[row, j] = np.float32(prio[lid])
+        frame.fade_weight[row, j] = np.float32(weight)
+        frame.fade_state[row, j] = state
 
-            # Fade.
-            if new or not prev_visible or first or cut:
-                slots = [[lid, 1.0, ON] for lid in selected]
-            else:
-                slots = []
-                for lid, weight, state in st.slots:
-                    if lid not in prio:
-                        continue  # no longer affects: freed at once
-                    if lid in selected_set:
-                        if state != ON:
-                            state = FADING_IN
-                            weight = 1.0 if cfg.fade_in == 0 else weight + dt / cfg.fade_in
-                            if weight >= 1 - EPS:
-                                weight, state = 1.0, ON
-                        slots.append([lid, weight, state])
-                    else:
-                        if cfg.fade_out == 0:
-                            continue
-                        weight = weight - dt / cfg.fade_out
-                        if weight <= EPS:
-                            continue
-                        slots.append([lid, weight, FADING_OUT])
-                held = {s[0] for s in slots}
-                waiting = _by_priority({lid: prio[lid] for lid in selected if lid not in held})
-                for lid in waiting[:k_max - len(slots)]:
-                    weight = 1.0 if cfg.fade_in == 0 else min(1.0, dt / cfg.fade_in)
-                    state = FADING_IN
-                    if weight >= 1 - EPS:
-                        weight, state = 1.0, ON
-                    slots.append([lid, weight, state])
-            st.slots = slots
-            st.selected = selected_set
-            st.visible = True
 
-            # Output order.
-            lit = [s for s in slots if s[2] != FADING_OUT]
-            out = [s for s in slots if s[2] == FADING_OUT]
-            lit.sort(key=lambda s: (-prio[s[0]], s[0]))
-            out.sort(key=lambda s: (-s[1], s[0]))
-            ordered = lit + out
-            frame.count[ob.row] = len(ordered)
-            # slot_shadow: up to max_shadowed_per_object shadowed slots, by weight, then
-            # output order (fading-out slots still sample their map).
-            shadowed = [(-w, j) for j, (lid, w, _) in enumerate(ordered) if lid in shadow_index]
-            for _, j in sorted(shadowed)[:cfg.max_shadowed_per_object]:
-                frame.slot_shadow[ob.row, j] = shadow_index[ordered[j][0]]
-            for j, (lid, weight, state) in enumerate(ordered):
-                frame.light_ids[ob.row, j] = lid
-                frame.light_index[ob.row, j] = row_of[lid]
-                frame.priority[ob.row, j] = np.float32(prio[lid])
-                frame.fade_weight[ob.row, j] = np.float32(weight)
-                frame.fade_state[ob.row, j] = state
-
-        frame.directional_lights = np.array(directional_ids, dtype=np.int32)
-        frame.shadow_lights = np.array(shadow_ids, dtype=np.int32)
-        frame.shadow_tier = np.array(tiers, dtype=np.uint16)
-        by_id = {lt.id: lt for lt in lights}
-        offsets, ids, masks = [0], [], []
-        for lid in shadow_ids:
-            lt = by_id[lid]
-            volumes = culling_volumes(lt, cams, cfg)
-            for ob in sorted(objects, key=lambda o: o.id):
-                bits = caster_mask(lt, ob, volumes)
-                if bits:
-                    ids.append(ob.id)
-                    masks.append(bits)
-            offsets.append(len(ids))
-        frame.caster_offsets = np.array(offsets, np.int64)
-        frame.caster_ids = np.array(ids, np.int32)
-        frame.caster_masks = np.array(masks, np.uint32)
-        frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
-                                        dtype=np.int32)
-        frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],
-                                        dtype=np.float64).reshape(len(cams), cfg.cascades + 1)
-        frame.stats = {
-            "plan": {"all": "reference"},
-            "counts": {
-                "visible_objects": int(sum(object_visible)),
-                "visible_lights": int(sum(light_visible)),
-                "pairs": pairs,
-            },
-            "seconds": {"total": time.perf_counter() - t0},
-        }
-        return freeze(frame)
+def _write_casters(frame: Any, lights: list[_Light], objects: list[_Object],
+                   shadow_ids: list[int], cams: list[CameraFrame], cfg: Config) -> None:
+    """caster_offsets, caster_ids and caster_masks (DESIGN section 2, "Casters"): per
+    shadow light, its casters by object id."""
+    by_id = {lt.id: lt for lt in lights}
+    offsets, ids, masks = [0], [], []
+    for lid in shadow_ids:
+        lt = by_id[lid]
+        volumes = culling_volumes(lt, cams, cfg)
+        for ob in sorted(objects, key=lambda o: o.id):
+            bits = caster_mask(lt, ob, volumes)
+            if bits:
+                ids.append(ob.id)
+                masks.append(bits)
+        offsets.append(len(ids))
+    frame.caster_offsets = np.array(offsets, np.int64)
+    frame.caster_ids = np.array(ids, np.int32)
+    frame.caster_masks = np.array(masks, np.uint32)
 
 
 def schedule(lights: dict[str, Any], objects: dict[str, Any], cameras: Any,

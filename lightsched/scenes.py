@@ -307,6 +307,132 @@ _DUNGEON_SPOTS = 4
 _DUNGEON_LIT_CORRIDORS = 4  # 6 rooms x 3 lights + 4 corridor lights = 22
 
 
+def _dungeon_corridors(centres: list[tuple[float, float]], h: float
+                       ) -> tuple[list[set[str]], list[tuple[tuple[float, float, float],
+                                                             tuple[float, float, float]]],
+                                  list[int]]:
+    """dungeon22's course: per room the sides its doors are on, and per corridor its box
+    and the axis it runs along (0: x, 2: z), room i to room i + 1 round the loop."""
+    n_rooms = len(_DUNGEON_LOOP)
+    # Doors: for room i, the sides ("+x", "-x", "+z", "-z") a corridor leaves from.
+    doors: list[set[str]] = [set() for _ in range(n_rooms)]
+    corridors: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
+    corridor_axis: list[int] = []
+    for i in range(n_rooms):
+        j = (i + 1) % n_rooms
+        (ci, ri), (cj, rj) = _DUNGEON_LOOP[i], _DUNGEON_LOOP[j]
+        (xi, zi), (xj, zj) = centres[i], centres[j]
+        if ri == rj:  # along x
+            sgn = 1.0 if cj > ci else -1.0
+            doors[i].add("+x" if sgn > 0 else "-x")
+            doors[j].add("-x" if sgn > 0 else "+x")
+            x0, x1 = sorted((xi + sgn * h, xj - sgn * h))
+            corridors.append(((x0, 0.0, zi - 0.5 * _CORR_W), (x1, _CORR_H, zi + 0.5 * _CORR_W)))
+            corridor_axis.append(0)
+        else:  # along z
+            sgn = 1.0 if rj > ri else -1.0
+            doors[i].add("+z" if sgn > 0 else "-z")
+            doors[j].add("-z" if sgn > 0 else "+z")
+            z0, z1 = sorted((zi + sgn * h, zj - sgn * h))
+            corridors.append(((xi - 0.5 * _CORR_W, 0.0, z0), (xi + 0.5 * _CORR_W, _CORR_H, z1)))
+            corridor_axis.append(2)
+
+    return doors, corridors, corridor_axis
+
+
+def _dungeon_boxes(rng: np.random.Generator, centres: list[tuple[float, float]], h: float,
+                   doors: list[set[str]], corridors: list, corridor_axis: list[int],
+                   props_per_room: int, racers: int) -> tuple[_Boxes, list]:
+    """dungeon22's objects: per room a floor, a ceiling, walls split round its doors and
+    props; per corridor a floor, a ceiling and two walls; the racers. Also the rooms'
+    boxes."""
+    boxes = _Boxes()
+    rooms = []
+    t, H = _WALL, _ROOM_H
+    for i, (xc, zc) in enumerate(centres):
+        x0, x1, z0, z1 = xc - h, xc + h, zc - h, zc + h
+        rooms.append(((x0, 0.0, z0), (x1, H, z1)))
+        boxes.add((x0, -t, z0), (x1, 0.0, z1), "floor")
+        boxes.add((x0, H, z0), (x1, H + t, z1), "ceiling")
+        for side in ("+x", "-x", "+z", "-z"):
+            # A wall along the side, inside the room's square, with a door gap if needed.
+            along = 2 if side[1] == "x" else 0  # the axis the wall runs along
+            a0, a1 = (z0, z1) if along == 2 else (x0, x1)
+            mid = 0.5 * (a0 + a1)
+            spans = [(a0, mid - 0.5 * _CORR_W), (mid + 0.5 * _CORR_W, a1)] if side in doors[i] \
+                else [(a0, a1)]
+            for s0, s1 in spans:
+                if side[1] == "x":
+                    xa, xb = (x1 - t, x1) if side[0] == "+" else (x0, x0 + t)
+                    boxes.add((xa, 0.0, s0), (xb, H, s1), "wall")
+                else:
+                    za, zb = (z1 - t, z1) if side[0] == "+" else (z0, z0 + t)
+                    boxes.add((s0, 0.0, za), (s1, H, zb), "wall")
+        # Props: crates (0.4..1.5 m) on the floor, one in five a pillar to the ceiling.
+        for _ in range(props_per_room):
+            px = rng.uniform(x0 + 1.0, x1 - 1.0)
+            pz = rng.uniform(z0 + 1.0, z1 - 1.0)
+            if rng.uniform() < 0.2:
+                e = rng.uniform(0.3, 0.5)
+                boxes.add((px - e, 0.0, pz - e), (px + e, H, pz + e), "prop")
+            else:
+                e = rng.uniform(0.2, 0.75, 3)
+                boxes.add((px - e[0], 0.0, pz - e[2]), (px + e[0], 2.0 * e[1], pz + e[2]), "prop")
+    for (lo, hi), axis in zip(corridors, corridor_axis, strict=True):
+        boxes.add((lo[0], -t, lo[2]), (hi[0], 0.0, hi[2]), "floor")
+        boxes.add((lo[0], _CORR_H, lo[2]), (hi[0], _CORR_H + t, hi[2]), "ceiling")
+        if axis == 0:
+            boxes.add((lo[0], 0.0, lo[2] - t), (hi[0], _CORR_H, lo[2]), "wall")
+            boxes.add((lo[0], 0.0, hi[2]), (hi[0], _CORR_H, hi[2] + t), "wall")
+        else:
+            boxes.add((lo[0] - t, 0.0, lo[2]), (lo[0], _CORR_H, hi[2]), "wall")
+            boxes.add((hi[0], 0.0, lo[2]), (hi[0] + t, _CORR_H, hi[2]), "wall")
+    # Racers: dynamic 1 x 1.2 x 2 m boxes spread along the loop (room centres and corridors).
+    stops = [(xc, zc) for xc, zc in centres] + [(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]))
+                                                for lo, hi in corridors]
+    for _ in range(racers):
+        sx, sz = stops[int(rng.integers(len(stops)))]
+        px, pz = sx + rng.uniform(-1.5, 1.5), sz + rng.uniform(-1.5, 1.5)
+        boxes.add((px - 0.5, 0.1, pz - 1.0), (px + 0.5, 1.3, pz + 1.0), "racer", static=False)
+    return boxes, rooms
+
+
+def _dungeon_lights(rng: np.random.Generator, centres: list[tuple[float, float]], h: float,
+                    corridors: list, sun: bool) -> list[tuple]:
+    """dungeon22's lights as rows (type, position, radius, direction, intensity, spot
+    fraction, shadows): per room two ceiling points and a wall spot or a low lamp, a
+    ceiling point in some corridors, and the sun if asked for."""
+    n_rooms = len(centres)
+    H = _ROOM_H
+    spot_rooms = set(rng.choice(n_rooms, _DUNGEON_SPOTS, replace=False).tolist())
+    lit = rng.choice(n_rooms, _DUNGEON_LIT_CORRIDORS, replace=False)
+    rows: list[tuple[int, tuple[float, float, float], float, tuple[float, float, float], float,
+                     float, bool]] = []
+    down = (0.0, -1.0, 0.0)
+    for i, (xc, zc) in enumerate(centres):
+        for sgn in (-1.0, 1.0):  # two ceiling lights along the room's x axis
+            p = (xc + sgn * 0.25 * _ROOM + rng.uniform(-1.0, 1.0), H - 0.3,
+                 zc + rng.uniform(-2.0, 2.0))
+            rows.append((POINT, p, rng.uniform(10.0, 14.0), down, rng.uniform(20.0, 60.0), 0.5, False))
+        if i in spot_rooms:  # a wall-mounted spot aimed at the floor near the room centre
+            side = rng.uniform(-0.5 * math.pi, 1.5 * math.pi)
+            p = (xc + (h - 0.8) * math.cos(side), H - 0.5, zc + (h - 0.8) * math.sin(side))
+            aim = (xc + rng.uniform(-3.0, 3.0), 0.0, zc + rng.uniform(-3.0, 3.0))
+            d = (aim[0] - p[0], aim[1] - p[1], aim[2] - p[2])
+            rows.append((SPOT, p, rng.uniform(15.0, 18.0), d, rng.uniform(60.0, 120.0),
+                         rng.uniform(0.5, 0.8), True))
+        else:  # a low lamp (torch) near a corner
+            p = (xc + rng.choice([-1.0, 1.0]) * (h - 1.5), 2.0, zc + rng.choice([-1.0, 1.0]) * (h - 1.5))
+            rows.append((POINT, p, rng.uniform(10.0, 13.0), down, rng.uniform(5.0, 20.0), 0.5, False))
+    for c in sorted(lit.tolist()):
+        lo, hi = corridors[c]
+        p = (0.5 * (lo[0] + hi[0]), _CORR_H - 0.3, 0.5 * (lo[2] + hi[2]))
+        rows.append((POINT, p, rng.uniform(9.0, 12.0), down, rng.uniform(10.0, 40.0), 0.5, False))
+    if sun:
+        rows.append((DIRECTIONAL, (0.0, 50.0, 0.0), 1.0, (0.4, -0.8, 0.3), 1.0, 0.5, False))
+    return rows
+
+
 def dungeon22(seed: int = 0, props_per_room: int = 40, racers: int = 8, sun: bool = False
               ) -> CityScene:
     """The thesis's shipped level as a closed course of rooms and corridors: 22 dynamic
@@ -356,109 +482,13 @@ def dungeon22(seed: int = 0, props_per_room: int = 40, racers: int = 8, sun: boo
     ncol = 1 + max(c for c, _ in _DUNGEON_LOOP)
     nrow = 1 + max(r for _, r in _DUNGEON_LOOP)
     centres = [((c - 0.5 * (ncol - 1)) * pitch, (r - 0.5 * (nrow - 1)) * pitch) for c, r in _DUNGEON_LOOP]
-    n_rooms = len(_DUNGEON_LOOP)
-
-    # Doors: for room i, the sides ("+x", "-x", "+z", "-z") a corridor leaves from.
-    doors: list[set[str]] = [set() for _ in range(n_rooms)]
-    corridors: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = []
-    corridor_axis: list[int] = []
-    for i in range(n_rooms):
-        j = (i + 1) % n_rooms
-        (ci, ri), (cj, rj) = _DUNGEON_LOOP[i], _DUNGEON_LOOP[j]
-        (xi, zi), (xj, zj) = centres[i], centres[j]
-        if ri == rj:  # along x
-            sgn = 1.0 if cj > ci else -1.0
-            doors[i].add("+x" if sgn > 0 else "-x")
-            doors[j].add("-x" if sgn > 0 else "+x")
-            x0, x1 = sorted((xi + sgn * h, xj - sgn * h))
-            corridors.append(((x0, 0.0, zi - 0.5 * _CORR_W), (x1, _CORR_H, zi + 0.5 * _CORR_W)))
-            corridor_axis.append(0)
-        else:  # along z
-            sgn = 1.0 if rj > ri else -1.0
-            doors[i].add("+z" if sgn > 0 else "-z")
-            doors[j].add("-z" if sgn > 0 else "+z")
-            z0, z1 = sorted((zi + sgn * h, zj - sgn * h))
-            corridors.append(((xi - 0.5 * _CORR_W, 0.0, z0), (xi + 0.5 * _CORR_W, _CORR_H, z1)))
-            corridor_axis.append(2)
-
-    boxes = _Boxes()
-    rooms = []
-    t, H = _WALL, _ROOM_H
-    for i, (xc, zc) in enumerate(centres):
-        x0, x1, z0, z1 = xc - h, xc + h, zc - h, zc + h
-        rooms.append(((x0, 0.0, z0), (x1, H, z1)))
-        boxes.add((x0, -t, z0), (x1, 0.0, z1), "floor")
-        boxes.add((x0, H, z0), (x1, H + t, z1), "ceiling")
-        for side in ("+x", "-x", "+z", "-z"):
-            # A wall along the side, inside the room's square, with a door gap if needed.
-            along = 2 if side[1] == "x" else 0  # the axis the wall runs along
-            a0, a1 = (z0, z1) if along == 2 else (x0, x1)
-            mid = 0.5 * (a0 + a1)
-            spans = [(a0, mid - 0.5 * _CORR_W), (mid + 0.5 * _CORR_W, a1)] if side in doors[i] \
-                else [(a0, a1)]
-            for s0, s1 in spans:
-                if side[1] == "x":
-                    xa, xb = (x1 - t, x1) if side[0] == "+" else (x0, x0 + t)
-                    boxes.add((xa, 0.0, s0), (xb, H, s1), "wall")
-                else:
-                    za, zb = (z1 - t, z1) if side[0] == "+" else (z0, z0 + t)
-                    boxes.add((s0, 0.0, za), (s1, H, zb), "wall")
-        # Props: crates (0.4..1.5 m) on the floor, one in five a pillar to the ceiling.
-        for _ in range(props_per_room):
-            px = rng.uniform(x0 + 1.0, x1 - 1.0)
-            pz = rng.uniform(z0 + 1.0, z1 - 1.0)
-            if rng.uniform() < 0.2:
-                e = rng.uniform(0.3, 0.5)
-                boxes.add((px - e, 0.0, pz - e), (px + e, H, pz + e), "prop")
-            else:
-                e = rng.uniform(0.2, 0.75, 3)
-                boxes.add((px - e[0], 0.0, pz - e[2]), (px + e[0], 2.0 * e[1], pz + e[2]), "prop")
-    for (lo, hi), axis in zip(corridors, corridor_axis, strict=True):
-        boxes.add((lo[0], -t, lo[2]), (hi[0], 0.0, hi[2]), "floor")
-        boxes.add((lo[0], _CORR_H, lo[2]), (hi[0], _CORR_H + t, hi[2]), "ceiling")
-        if axis == 0:
-            boxes.add((lo[0], 0.0, lo[2] - t), (hi[0], _CORR_H, lo[2]), "wall")
-            boxes.add((lo[0], 0.0, hi[2]), (hi[0], _CORR_H, hi[2] + t), "wall")
-        else:
-            boxes.add((lo[0] - t, 0.0, lo[2]), (lo[0], _CORR_H, hi[2]), "wall")
-            boxes.add((hi[0], 0.0, lo[2]), (hi[0] + t, _CORR_H, hi[2]), "wall")
-    # Racers: dynamic 1 x 1.2 x 2 m boxes spread along the loop (room centres and corridors).
-    stops = [(xc, zc) for xc, zc in centres] + [(0.5 * (lo[0] + hi[0]), 0.5 * (lo[2] + hi[2]))
-                                                for lo, hi in corridors]
-    for _ in range(racers):
-        sx, sz = stops[int(rng.integers(len(stops)))]
-        px, pz = sx + rng.uniform(-1.5, 1.5), sz + rng.uniform(-1.5, 1.5)
-        boxes.add((px - 0.5, 0.1, pz - 1.0), (px + 0.5, 1.3, pz + 1.0), "racer", static=False)
+    doors, corridors, corridor_axis = _dungeon_corridors(centres, h)
+    boxes, rooms = _dungeon_boxes(rng, centres, h, doors, corridors, corridor_axis,
+                                  props_per_room, racers)
     objects, groups = boxes.objects(np.random.default_rng(id_ss))
 
-    # --- lights
     rng = np.random.default_rng(light_ss)
-    spot_rooms = set(rng.choice(n_rooms, _DUNGEON_SPOTS, replace=False).tolist())
-    lit = rng.choice(n_rooms, _DUNGEON_LIT_CORRIDORS, replace=False)
-    rows: list[tuple[int, tuple[float, float, float], float, tuple[float, float, float], float,
-                     float, bool]] = []
-    down = (0.0, -1.0, 0.0)
-    for i, (xc, zc) in enumerate(centres):
-        for sgn in (-1.0, 1.0):  # two ceiling lights along the room's x axis
-            p = (xc + sgn * 0.25 * _ROOM + rng.uniform(-1.0, 1.0), H - 0.3,
-                 zc + rng.uniform(-2.0, 2.0))
-            rows.append((POINT, p, rng.uniform(10.0, 14.0), down, rng.uniform(20.0, 60.0), 0.5, False))
-        if i in spot_rooms:  # a wall-mounted spot aimed at the floor near the room centre
-            side = rng.uniform(-0.5 * math.pi, 1.5 * math.pi)
-            p = (xc + (h - 0.8) * math.cos(side), H - 0.5, zc + (h - 0.8) * math.sin(side))
-            aim = (xc + rng.uniform(-3.0, 3.0), 0.0, zc + rng.uniform(-3.0, 3.0))
-            d = (aim[0] - p[0], aim[1] - p[1], aim[2] - p[2])
-            rows.append((SPOT, p, rng.uniform(15.0, 18.0), d, rng.uniform(60.0, 120.0),
-                         rng.uniform(0.5, 0.8), True))
-        else:  # a low lamp (torch) near a corner
-            p = (xc + rng.choice([-1.0, 1.0]) * (h - 1.5), 2.0, zc + rng.choice([-1.0, 1.0]) * (h - 1.5))
-            rows.append((POINT, p, rng.uniform(10.0, 13.0), down, rng.uniform(5.0, 20.0), 0.5, False))
-    for c in sorted(lit.tolist()):
-        lo, hi = corridors[c]
-        p = (0.5 * (lo[0] + hi[0]), _CORR_H - 0.3, 0.5 * (lo[2] + hi[2]))
-        rows.append((POINT, p, rng.uniform(9.0, 12.0), down, rng.uniform(10.0, 40.0), 0.5, False))
-    if sun:
-        rows.append((DIRECTIONAL, (0.0, 50.0, 0.0), 1.0, (0.4, -0.8, 0.3), 1.0, 0.5, False))
+    rows = _dungeon_lights(rng, centres, h, corridors, sun)
     n_l = len(rows)
     ltype = np.array([r[0] for r in rows], np.uint8)
     order = rng.permutation(n_l)  # rows in no particular order, like the city's
