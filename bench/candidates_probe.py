@@ -40,11 +40,11 @@ import numpy as np
 from common import parse_sizes, say
 from kernel_profile import capture, fresh
 
-from lightsched.group import group_pairs
+from lightsched.group import PairHeap, group_pairs
 from lightsched.jit import GROUP_PARTS
 from lightsched.priority import box_d2, record_pair_p
 from lightsched.scene import DIRECTIONAL
-from lightsched.walk import light_bounds, light_pass
+from lightsched.walk import LightPairs, light_bounds, light_pass
 
 
 @nb.njit(nogil=True, inline="always", error_model="numpy")
@@ -110,10 +110,10 @@ def light_major(lights, rows, grid, vis, params, n_obj):
     count = light_pass(lights, rows, grid, vis, off, pair_obj, pair_p, params)
     h = int(count.sum())
     start = np.empty(n_obj + 1, np.int64)
-    heap = (np.empty(h), np.empty(h, np.int32))
+    heap = PairHeap.empty(h)
     hist = np.empty((GROUP_PARTS, n_obj + 1), np.int32)
-    group_pairs(rows, off, count, pair_obj, pair_p, (hist, start, heap))
-    return start, heap[0], heap[1]
+    group_pairs(LightPairs(rows, off, count, pair_obj, pair_p), hist, start, heap)
+    return start, heap.p, heap.light_row
 
 
 def triples(obj_of_slot, p, j):

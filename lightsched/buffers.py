@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .group import PairHeap
 from .priority import aligned_empty
 
 
@@ -33,7 +34,7 @@ class Buffers:
 
     def __init__(self) -> None:
         self._named: dict[str, np.ndarray] = {}
-        self.spare_heap: tuple[np.ndarray, np.ndarray] | None = None
+        self.spare_heap: PairHeap | None = None
         self.spare_outputs: SpareOutputs | None = None
         self.kept_run: tuple[tuple[np.ndarray, ...], np.ndarray] | None = None
         self.hidden: tuple[np.ndarray, ...] | None = None
@@ -56,16 +57,15 @@ class Buffers:
             self._named["rows"] = rows
         return read_only_view(rows) if read_only else rows
 
-    def new_heap(self, room: int) -> tuple[np.ndarray, np.ndarray]:
-        """A pair heap (P float64, light row int32) of at least ``room`` records: the one
+    def new_heap(self, room: int) -> PairHeap:
+        """A pair heap of at least ``room`` records: the one
         the last frame replaced when it is large enough and not over twice that, else new
         arrays with an eighth more room, so that a scene a little larger next frame takes
         this one back."""
         spare, self.spare_heap = self.spare_heap, None
-        if spare is not None and room <= spare[0].size <= 2 * room + 4096:
+        if spare is not None and room <= spare.p.size <= 2 * room + 4096:
             return spare
-        room += room // 8
-        return (np.empty(room), np.empty(room, np.int32))
+        return PairHeap.empty(room + room // 8)
 
 
 def read_only_view(a: np.ndarray) -> np.ndarray:

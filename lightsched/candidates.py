@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -52,25 +52,49 @@ if TYPE_CHECKING:
     from .tuning import Tuning
 
 
+class CandidateLists(NamedTuple):
+    """The candidate lists by object row, each in a room with space to grow
+    (spread_lists), so that edit_candidates changes them in place."""
+
+    seg: np.ndarray        # int64 [N, 2]: the list's start in light_row, its length
+    cap: np.ndarray        # int64 [N]: the room the list has
+    light_row: np.ndarray  # int32 [C]: the lists, then spare room
+    fill: np.ndarray       # int64 [GROUP_PARTS, 2]: per row range, where its next moved
+    #                        list goes and the end of its share of the spare room
+
+
+class LightLists(NamedTuple):
+    """The candidate lists by light row: light j's objects at object_row[seg[j, 0]:][:seg[j, 1]],
+    appended frame after frame (light_lists), packed when full (compact_light_lists)."""
+
+    seg: np.ndarray         # int64 [L, 2]: start, length
+    object_row: np.ndarray  # int32 [H]
+
+
+class RowRecords(NamedTuple):
+    """The grid's object records copied into object row order (grid.Records' box and
+    bits, row o at o), as candidate_pairs reads them."""
+
+    box: np.ndarray   # [N, 8] float64 (float32 in "fast")
+    bits: np.ndarray  # the same memory as unsigned integers (the mask word, column 6)
+
+
 @dataclass
 class Candidates:
     """Per object row, the point and spot lights that may affect it while each stays
     inside its anchored sphere (candidate_pairs): ``anchor`` [L, 4] is per light row the
     centre (records' frame) and radius of the sphere its candidates were found with,
-    radius 0 for none; ``lists`` = (seg [N, 2] (start, length), cap [N], light row int32,
-    fill) the lists by object row, each in a room with space to grow (spread_lists);
-    ``by_light`` = (seg [L, 2], object row int32) the same by light row, from record
-    ``used`` on free (packed when full); ``records`` the grid's records in object row
-    order, their masks following the visibility as the grid's do; ``hidden`` whether the
-    lists hold the objects out of view too. Valid while the objects, the records' origin
-    and the grid are the ones they were made with and, unless ``hidden``, no object came
-    into view (pairs.find_pairs)."""
+    radius 0 for none; ``lists`` the lists by object row, ``by_light`` the same by light
+    row, from record ``used`` on free; ``records`` the grid's records in object row
+    order; ``hidden`` whether the lists hold the objects out of view too. Valid while the
+    objects, the records' origin and the grid are the ones they were made with and,
+    unless ``hidden``, no object came into view (pairs.find_pairs)."""
 
     anchor: np.ndarray
-    lists: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-    by_light: tuple[np.ndarray, np.ndarray]
+    lists: CandidateLists
+    by_light: LightLists
     used: int
-    records: tuple[np.ndarray, np.ndarray]
+    records: RowRecords
     hidden: bool
 
 
@@ -93,7 +117,7 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
     objects in view, which keeps the walks and lists of a still camera smaller. Returns
     (lists, the rows of the lights whose lists changed: those walked and those dropped,
     made from scratch)."""
-    hot = packed.rows[0]
+    hot = packed.rows.hot
     n_l = hot.shape[0]
     own = packed.compete.copy()
     own[packed.dir_all] = False
@@ -116,7 +140,7 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
     now = lights.position
     # Centred ahead of a moving light, along its last step: it crosses the widened sphere
     # before it leaves it, ~(1 + lead) x as many frames.
-    positions = (now, now if last_position is None else last_position)
+    last = now if last_position is None else last_position
     exact = grid.records.box.dtype == np.float64
 
     def walk_of(mask: np.ndarray) -> LightPairs:
@@ -124,7 +148,7 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
         # masks in the upper half of the word, which a walker's mask of every bit of the
         # word meets (SHOWN).
         every = -1.0 if hold and exact else float(SHOWN)
-        sel = widen_walkers(hot, mask, positions, wide, (tuning.skin, tuning.lead, every))
+        sel = widen_walkers(hot, mask, now, last, wide, tuning.skin, tuning.lead, every)
         rows = light_order(hot, sel, grid.index.frame, grid.index.dims)
         params = PairParams(MODEL_CONTRIBUTION, 0.0, 0.0)
         if not hold or exact:
@@ -147,49 +171,51 @@ def update_candidates(old: Candidates | None, *, lights: LightStore, objects: Ob
 
     walked = walk_of(walk_mask)
     if gone.size:
-        rows, offsets, count = walked[:3]
+        rows, offsets, count = walked.rows, walked.offsets, walked.count
         walked = LightPairs(np.concatenate([rows, gone.astype(rows.dtype)]),
                             np.concatenate([offsets, np.full(gone.size, offsets[-1])]),
                             np.concatenate([count, np.zeros(gone.size, count.dtype)]),
                             walked.obj, walked.p)
     if old is not None:
-        if edit_candidates(walked[:4], old.lists, old.by_light):
+        if edit_candidates(walked, old.lists, old.by_light):
             by_light, used = old.by_light, old.used
-            n_new = int(walked[2].sum())
-            if used + n_new > by_light[1].size:
+            n_new = int(walked.count.sum())
+            if used + n_new > by_light.object_row.size:
                 # Packed, with room for the live lists again (a few dozen frames).
                 l_seg, l_obj, used = compact_light_lists(
-                    by_light, int(by_light[0][:, 1].sum()) + n_new + 1024)
-                by_light = (l_seg, l_obj)
-            used = light_lists(walked[:4], by_light, used)
+                    by_light, int(by_light.seg[:, 1].sum()) + n_new + 1024)
+                by_light = LightLists(l_seg, l_obj)
+            used = light_lists(walked, by_light, used)
             out = Candidates(old.anchor, old.lists, by_light, used, old.records, hold)
         else:
             old, walk_mask, hold, gone = None, own, hidden, gone[:0]
             walked = walk_of(own)
     if old is None:
         out = _new_lists(walked, grid, n_l, hold, buffers)
-    walk = walked[0][:walked[0].size - gone.size]
+    walk = walked.rows[:walked.rows.size - gone.size]
     out.anchor[walk] = wide[walk, :4]
     out.anchor[gone, 3] = 0.0
-    return out, walked[0], old is None
+    return out, walked.rows, old is None
 
 
 def _new_lists(walked: LightPairs, grid: Grid, n_l: int, hold: bool,
                buffers: Buffers) -> Candidates:
     """Candidate lists made from scratch from a walk of every light (``walked``)."""
     n = grid.pos_of.size
-    start, (_, light_j) = group_by_object(walked, n, buffers)
+    start, grouped = group_by_object(walked, n, buffers)
+    light_j = grouped.light_row
     room = int(list_room(start))
-    lists = (np.empty((n, 2), np.int64), np.empty(n, np.int64),
-             np.empty(room + max(4096, room // 4), np.int32),
-             np.empty((GROUP_PARTS, 2), np.int64))
+    lists = CandidateLists(np.empty((n, 2), np.int64), np.empty(n, np.int64),
+                           np.empty(room + max(4096, room // 4), np.int32),
+                           np.empty((GROUP_PARTS, 2), np.int64))
     spread_lists(start, light_j, lists)
-    by_light = (np.zeros((n_l, 2), np.int64), np.empty(2 * light_j.size + 1024, np.int32))
-    used = light_lists(walked[:4], by_light, 0)
+    by_light = LightLists(np.zeros((n_l, 2), np.int64),
+                          np.empty(2 * light_j.size + 1024, np.int32))
+    used = light_lists(walked, by_light, 0)
     box = np.take(grid.records.box, grid.pos_of, axis=0, mode="wrap",
                   out=aligned_empty((n, 8), grid.records.box.dtype))
     return Candidates(np.zeros((n_l, 4)), lists, by_light, used,
-                      (box, box.view(grid.records.bits.dtype)), hold)
+                      RowRecords(box, box.view(grid.records.bits.dtype)), hold)
 
 # candidate_pairs asks for the light rows of the object this many rows ahead, once
 # light_hot is over PREFETCH_BYTES: an object's candidates are rows of it at random, which
@@ -208,7 +234,7 @@ LIST_AHEAD = 8
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, used):
+def candidate_pairs(rows, lists, recs, lights, compete, dir_rows, params, seg, heap, used):
     """The pairs of the object ``rows`` (int64, ascending) from their candidate lights
     (scheduler._Candidates: the point and spot lights whose sphere, widened by a skin,
     reached the object when its list was made, and which still lies inside that widened
@@ -230,11 +256,12 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     cached, those of the next object's candidates are prefetched while this one's are
     tested (PREFETCH_OBJECTS).
 
-    cands = (seg [N, 2] (start, length), light row int32 [C]); recs = (boxes [N, 8], their
-    integer view): the grid's records in object row order; lights = (light_hot, light_f);
-    params = (model, w_obj, w_int); out = (seg [N, 2], P [H], light row int32 [H]), the
-    heap's records from ``used`` on free for the rows' candidates plus len(dir_rows) per
-    row. Writes the rows' segments (the others' are left as they are), each object's pairs
+    DESIGN section 2 ("Affects", "Priority") on the pairs of DESIGN section 6's candidate
+    lists. lists: CandidateLists; recs: RowRecords; lights: priority.PackedLights;
+    compete: bool [L], the lights that compete for slots; params: priority.PairParams;
+    seg [N, 2] (start, length) and heap (group.PairHeap): the pair cache, the heap's
+    records from ``used`` on free for the rows' candidates plus len(dir_rows) per row.
+    Writes the rows' segments (the others' are left as they are), each object's pairs
     in candidate order within the room of its chunk of rows, and returns (the end of those
     rooms, the number of pairs written, the number of pairs the rows' old segments held);
     (that end, -1, that number) with nothing written when the heap is shorter than it, so
@@ -243,10 +270,10 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
     learns its room and the pairs it drops in the one parallel pass over its rows that
     sizes the chunks (a separate serial pass would cost more: those rows' seg entries are
     cache misses)."""
-    c_seg, c_j = cands
-    box, bits = recs
-    hot, lf = lights
-    o_seg, o_p, o_j = out
+    c_seg, c_j = lists.seg, lists.light_row
+    box, bits = recs.box, recs.bits
+    hot, lf = lights.hot, lights.f
+    o_seg, o_p, o_j = seg, heap.p, heap.light_row
     model = params.model
     n_rows = rows.shape[0]
     n_dir = dir_rows.shape[0]
@@ -281,8 +308,8 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
         r0 = ch * OBJECT_CHUNK
         r1 = min(n_rows, r0 + OBJECT_CHUNK)
         if stream:
-            k = _stream_chunk(cands, recs, lights, compete, (rows, r0, r1), room[ch:ch + 2],
-                              out)
+            k = _stream_chunk(lists, recs, lights, compete, rows, r0, r1, room[ch:ch + 2],
+                              seg, heap)
             if k >= 0:
                 wrote[ch] = k
                 continue
@@ -307,8 +334,7 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
                 if end >= 0:
                     a = b
                     m = end
-            m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, (o_p, o_j), m,
-                                  params)
+            m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, heap, m, params)
             for d in range(n_dir):
                 j = dir_rows[d]
                 if ob & np.int64(hot[j, 4]) != 0:
@@ -321,50 +347,53 @@ def candidate_pairs(rows, cands, recs, lights, compete, dir_rows, params, out, u
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _stream_chunk(cands, recs, lights, compete, span, room, out):
-    """candidate_pairs' vector path for the object rows of span = (rows, r0, r1), i.e.
-    rows[r0:r1] (no directional light in the slots): their
+def _stream_chunk(lists, recs, lights, compete, rows, r0, r1, room, seg, heap):
+    """candidate_pairs' vector path for the object rows rows[r0:r1] (no directional light
+    in the slots): their
     candidates laid end to end (simd.stream_fill), the exact test and P eight entries a
     step (stream_run), the spots in range eight a step (stream_spots), the pairs packed
     from room[0] on (stream_pack; room[1]: the end of the chunk's room), each object's
     segment from the pairs before its first entry. The same pairs, in the same order and
     bits, as candidate_run object by object. Returns the number of pairs written, or -1,
-    having written nothing, for float32 records. out as candidate_pairs'."""
-    rows, r0, r1 = span
-    o_seg, o_p, o_j = out
+    having written nothing, for float32 records. The other parameters as
+    candidate_pairs'."""
     base = room[0]
     # Each step stores eight entries whole: room for one more step.
     ints = np.empty((3, room[1] - base + LANES), np.int32)
     stream = (ints[0], ints[1])
     spots = ints[2]
     starts = np.empty(r1 - r0 + 1, np.int64)
-    n_s = stream_fill(cands, recs, rows, r0, r1, stream, starts)
+    # simd's primitives take plain tuples (their IR checks the types).
+    n_s = stream_fill((lists.seg, lists.light_row), (recs.box, recs.bits), rows, r0, r1,
+                      stream, starts)
     if n_s < 0:
         return -1
-    box = recs[0]
+    box = recs.box
     results = (np.empty(n_s + LANES), np.empty(n_s + LANES, np.uint8))
-    n_spots = stream_run(box, lights[0], compete, stream, n_s, results, spots)
+    n_spots = stream_run(box, lights.hot, compete, stream, n_s, results, spots)
     if n_spots:
-        stream_spots(box, lights, stream, spots, n_spots, results)
+        stream_spots(box, (lights.hot, lights.f), stream, spots, n_spots, results)
     before = np.empty(n_s + LANES + 1, np.int64)
-    stream_pack(stream, results, n_s, (o_p, o_j), base, before)
+    stream_pack(stream, results, n_s, (heap.p, heap.light_row), base, before)
     for r in range(r0, r1):
         o = rows[r]
         a = before[starts[r - r0]]
-        o_seg[o, 0] = base + a
-        o_seg[o, 1] = before[starts[r - r0 + 1]] - a
+        seg[o, 0] = base + a
+        seg[o, 1] = before[starts[r - r0 + 1]] - a
     return before[n_s]
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
-    """candidate_pairs' rule, one candidate at a time: of object row o (record o of box,
-    mask bits ob) and the candidate light rows c_j[a:b], the pairs of lights that compete with
-    a mask bit of the object's, in range, then record_pair_p (cone, P of the model), appended
-    from m to out = (P, light row); returns the new end. simd.candidate_run does the same
-    eight at a time (tests/test_simd.py holds one against the other)."""
-    hot, lf = lights
-    o_p, o_j = out
+    """candidate_pairs' rule, one candidate at a time (DESIGN section 2, "Affects" and
+    "Priority"): of object row o (record o of box, mask bits ob) and the candidate light
+    rows c_j[a:b], the pairs of lights (priority.PackedLights) that compete with a mask
+    bit of the object's, in range, then record_pair_p (cone, P of the model
+    priority.PairParams), appended from m to ``out`` (group.PairHeap); returns the new
+    end. simd.candidate_run does the same eight at a time (tests/test_simd.py holds one
+    against the other)."""
+    hot, lf = lights.hot, lights.f
+    o_p, o_j = out.p, out.light_row
     model = params.model
     for t in range(a, b):
         j = np.int64(c_j[t])
@@ -382,19 +411,17 @@ def scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def widen_walkers(hot, walk, positions, wide, widen):
+def widen_walkers(hot, walk, now, last, wide, skin, lead, every):
     """The rows of the lights that walk for the candidate lists (``walk`` True per light
     row), int32 ascending, with their rows of ``wide`` written from light_hot's: the radius
     widened by skin, the mask ``every`` (every mask bit: float(SHOWN), or -1.0 to meet the
     hidden masks of the objects out of view too), the point type (whatever the light's
     type: the lists hold the range test only), and the centre ahead along the light's last
-    step by lead x skin x its radius (positions = (world positions now, last frame's); a
-    light that did not move keeps its centre). widen = (scheduler.SKIN, scheduler.LEAD,
-    every). One loop over the lights, where numpy took a dozen calls on the walkers' rows,
-    each paying numpy's per-call overhead.
+    step by lead x skin x its radius (now, last: the lights' world positions [L, 3] now
+    and last frame; a light that did not move keeps its centre); skin, lead: Tuning's.
+    DESIGN section 6 (candidate lists). One loop over the lights, where numpy took a dozen
+    calls on the walkers' rows, each paying numpy's per-call overhead.
     """
-    skin, lead, every = widen
-    now, last = positions
     n = 0
     for j in range(walk.shape[0]):
         n += walk[j]
@@ -446,7 +473,9 @@ def left_spheres(hot, anchor, own):
     i.e. |p - anchor| + r > reach, with room for rounding (while it stays inside, every
     object it reaches is within reach of the anchor). One loop, not numpy on the [L, 8]
     records' strided columns, whose temporaries cost many times the loop; parallel from
-    SERIAL_SPHERES lights."""
+    SERIAL_SPHERES lights. hot: light_hot [L, 8] float64 (priority.PackedLights.hot);
+    own: bool [L], the competing point and spot lights; returns bool [L] (False where not
+    ``own``). DESIGN section 6 (candidate lists: lights that moved a little keep theirs)."""
     out = np.zeros(hot.shape[0], np.bool_)
     if hot.shape[0] < SERIAL_SPHERES:
         for j in range(hot.shape[0]):
@@ -463,12 +492,13 @@ def left_spheres(hot, anchor, own):
 def spread_lists(start, light_j, lists):
     """Candidate lists grouped by object (object o's at start[o]..start[o+1]-1 of
     ``light_j``) copied into rooms with space to grow (len + 2 + len // 2 each), so that
-    ``edit_candidates`` changes them in place and they stay in row order. lists = (seg
-    [N, 2] (start, length), cap [N] (room), light row int32 [C], fill [GROUP_PARTS, 2]):
-    cand must hold the rooms' total (``list_room``); the rest is spare room, shared out
-    to the GROUP_PARTS row ranges of edit_candidates: fill[q] = (where part q's next moved
-    list goes, the end of its share)."""
-    seg, cap, cand, fill = lists
+    ``edit_candidates`` changes them in place (a list that outgrows its room moves to
+    the spare room, out of row order). lists:
+    CandidateLists, whose light_row must hold the rooms' total (``list_room``); the rest
+    is spare room, shared out to the GROUP_PARTS row ranges of edit_candidates. start:
+    int64 [N + 1]; light_j: int32 light rows (group.group_by_object's PairHeap.light_row).
+    DESIGN section 6 (the candidate lists' layout)."""
+    seg, cap, cand, fill = lists.seg, lists.cap, lists.light_row, lists.fill
     n = seg.shape[0]
     at = 0
     for o in range(n):
@@ -489,12 +519,14 @@ def spread_lists(start, light_j, lists):
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def compact_light_lists(by_light, spare):
-    """The lists by light row packed into a new array with ``spare`` free records after
+    """The lists by light row (LightLists) packed into a new array with ``spare`` free records after
     them (the segments light_lists left behind are garbage); returns (seg, object rows,
     records used). The lists, appended frame after frame, lie scattered over the old
     array: copied one light a time in parallel, each a slice (one element at a time on
-    one thread, it was a spike in the frames it falls on; bench/RESULTS.md)."""
-    l_seg, l_obj = by_light
+    one thread, it was a spike in the frames it falls on; bench/RESULTS.md). by_light:
+    LightLists; spare: int.
+    DESIGN section 6 (the candidate lists' upkeep)."""
+    l_seg, l_obj = by_light.seg, by_light.object_row
     new_seg = np.empty_like(l_seg)
     at = 0
     for j in range(l_seg.shape[0]):
@@ -510,7 +542,8 @@ def compact_light_lists(by_light, spare):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def list_room(start):
-    """The total room spread_lists gives lists grouped at ``start``."""
+    """The total room spread_lists gives lists grouped at ``start`` (int64 [N + 1], as
+    spread_lists'), an int. DESIGN section 6 (the candidate lists' layout)."""
     at = 0
     for o in range(start.shape[0] - 1):
         at += _room_for(start[o + 1] - start[o])
@@ -526,13 +559,15 @@ def _room_for(m):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def list_objects(by_light, lights, mark):
     """Marks (True in ``mark``) the objects in the candidate lists of the light rows
-    ``lights`` (by_light = (seg [L, 2], object rows), as light_lists keeps them).
+    ``lights`` (light rows, int32 or int64; by_light: LightLists, as light_lists keeps
+    them); mark: bool [N], by object row. DESIGN section 6 (only the objects changed
+    lights can touch are recomputed).
 
     Each light's seg row and the start of its list are misses (lights at random, lists
     scattered over the heap): both are prefetched LIST_AHEAD lights ahead, the seg row
     twice as far so that its list's start can be read. One thread: two would write the
     same lines of ``mark``."""
-    l_seg, l_obj = by_light
+    l_seg, l_obj = by_light.seg, by_light.object_row
     n = lights.shape[0]
     for t in range(n):
         if t + 2 * LIST_AHEAD < n:
@@ -550,7 +585,9 @@ def reached_rows(reach, visible, more):
     (``reach``, list_objects' marks) that are in view, whose pairs it makes again, and the
     rows it runs the object pass on: those, and the rows ``more`` marks (fading ones).
     Both ascending, int64, in one pass without branches: with about half of the rows
-    reached (lights10), np.flatnonzero of a mask mispredicts on nearly every other row."""
+    reached (lights10), np.flatnonzero of a mask mispredicts on nearly every other row.
+    reach, visible (the objects' visibility), more: [N] bools viewed as uint8. DESIGN
+    section 6 (only the objects changed lights can touch are recomputed)."""
     n = reach.shape[0]
     rows = np.empty(n, np.int64)
     run = np.empty(n, np.int64)
@@ -567,12 +604,12 @@ def reached_rows(reach, visible, more):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def light_lists(walked, by_light, used):
-    """Each walked light's objects (walked = light_pass's rows, offsets, count, object
-    rows) appended to the lists by light row (by_light = (seg [L, 2], object rows [H]))
-    from record ``used``; returns the records used after them, or -1 when they do not
-    fit (nothing is written then)."""
-    rows, offsets, count, pair_obj = walked
-    l_seg, l_obj = by_light
+    """Each walked light's objects (walked: walk.LightPairs) appended to the lists by light
+    row (by_light: LightLists) from record ``used`` (int); returns the records used after
+    them, or -1 when they do not fit (nothing is written then). DESIGN section 6 (the
+    candidate lists' upkeep)."""
+    rows, offsets, count, pair_obj = walked.rows, walked.offsets, walked.count, walked.obj
+    l_seg, l_obj = by_light.seg, by_light.object_row
     total = 0
     for t in range(rows.shape[0]):
         total += count[t]
@@ -599,11 +636,12 @@ def edit_candidates(walked, lists, by_light):
     each edited by one thread in the walk's light order (so each list sees the same edits
     in the same order whatever the threads), with its own stamps; a list that outgrows
     its room moves to its part's spare space with twice the room. lists as spread_lists
-    made them. Returns False when a part's spare space ran out (the caller makes every
-    list again: they are half edited)."""
-    rows, offsets, count, pair_obj = walked
-    seg, cap, cand, fill = lists
-    l_seg, l_obj = by_light
+    made them. walked: walk.LightPairs; lists: CandidateLists; by_light: LightLists.
+    Returns False when a part's spare space ran out (the caller makes every list again:
+    they are half edited). DESIGN section 6 (the candidate lists' upkeep)."""
+    rows, offsets, count, pair_obj = walked.rows, walked.offsets, walked.count, walked.obj
+    seg, cap, cand, fill = lists.seg, lists.cap, lists.light_row, lists.fill
+    l_seg, l_obj = by_light.seg, by_light.object_row
     n = seg.shape[0]
     ok = np.ones(GROUP_PARTS, np.bool_)
     for q in nb.prange(GROUP_PARTS):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from itertools import accumulate
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -44,13 +44,41 @@ if TYPE_CHECKING:
     from .changes import Changes
     from .frustum import Cameras
     from .plan import FramePlan
-    from .priority import Packed
+    from .priority import Packed, PackedLights
     from .shadows import ShadowSet
     from .tuning import Tuning
 
 MAX_PLANES = 18  # a convex volume here has at most 6 faces plus 12 edge planes
 SWEEP_BLOCK = 512  # boxes per block of sweep_casters: its [6, 512] float64 columns fit L1
 SWEEP_PARTS = 64  # sweep_casters' parallel parts, each a run of blocks
+
+
+class Volumes(NamedTuple):
+    """The culling volumes of L shadow lights (culling_volumes), V = cameras x cascades
+    each: volume k of a point or spot light is its hull with camera k's frustum, volume
+    k*C + c of a directional light camera k's cascade c swept towards it."""
+
+    vn: np.ndarray      # float64 [L, V, MAX_PLANES, 3]: plane normals (edge planes' not unit)
+    vq: np.ndarray      # float64 [L, V, MAX_PLANES, 3]: a point of each plane
+    vm: np.ndarray      # int64 [L, V]: plane count, -1 for a volume the light does not have
+    shared: np.ndarray  # int64 [L, C]: leading planes of camera k's cascades (directional)
+
+
+class CasterObjects(NamedTuple):
+    """The object store's columns a caster test reads, by object row, in world space like
+    the culling volumes."""
+
+    casts: np.ndarray  # bool [N]: casts_shadows
+    mask: np.ndarray   # uint32 [N]
+    lo: np.ndarray     # float64 [N, 3]: bounds_min
+    hi: np.ndarray     # float64 [N, 3]: bounds_max
+
+
+class CasterLists(NamedTuple):
+    """grid_casters' output: light t writes its casters from offsets[t] on."""
+
+    rows: np.ndarray   # int64 [offsets[-1]]: object rows
+    masks: np.ndarray  # uint32 [offsets[-1]]: their caster masks
 
 
 # The 12 edges of a frustum: (face a, face b, corner c0, corner c1), faces 0 near, 1 far,
@@ -158,16 +186,17 @@ def _sweep(v, corners, cen, face_n, face_q, vn, vq):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _volumes(rows, store, cams, splits, overlap):
-    """Kernel of ``culling_volumes``: per light of the store rows ``rows`` (store = the
-    light store's type, position, direction: read at those rows here, not by three numpy
-    gathers, whose per-call overhead a small frame feels) its volumes
-    [L, n_vol, MAX_PLANES, 3] (normals, points), plane counts [L, n_vol] (-1 for the
-    volumes a point or spot light does not have: it has one per camera) and, for a
-    directional light, the number of leading planes its cascades of camera k share
-    [L, n_cam]."""
-    typ, position, direction = store
-    cam_p, basis, tan_xy, plane_n, plane_p, near_far = cams
+def _volumes(rows, light_type, position, direction, cams, splits, overlap):
+    """Kernel of ``culling_volumes`` (DESIGN section 2, "Casters"): per light of the store
+    rows ``rows`` its volumes. light_type, position, direction: the light store's columns,
+    read at those rows here, not by three numpy gathers, whose per-call overhead a small
+    frame feels; cams: frustum.CameraArrays; splits [C, n_casc + 1]: cascade_splits; overlap:
+    cascade_overlap. Returns the fields of Volumes: normals and points
+    [L, n_vol, MAX_PLANES, 3], plane counts [L, n_vol] (-1 for the volumes a point or spot
+    light does not have: it has one per camera) and, for a directional light, the number
+    of leading planes its cascades of camera k share [L, n_cam]."""
+    cam_p, basis, tan_xy = cams.position, cams.basis, cams.tan_xy
+    plane_n, plane_p, near_far = cams.plane_n, cams.plane_p, cams.near_far
     n_cam = cam_p.shape[0]
     n_casc = splits.shape[1] - 1
     n_l = rows.shape[0]
@@ -181,7 +210,7 @@ def _volumes(rows, store, cams, splits, overlap):
     v = np.empty(3)
     for t in range(n_l):
         j = rows[t]
-        if typ[j] != DIRECTIONAL:
+        if light_type[j] != DIRECTIONAL:
             for k in range(n_cam):
                 cen = _corners(cam_p[k], basis[k], tan_xy[k], near_far[k, 0], near_far[k, 1],
                                corners)
@@ -208,17 +237,13 @@ def _volumes(rows, store, cams, splits, overlap):
 
 
 def culling_volumes(lights: LightStore, rows: np.ndarray, frames: CameraFrames,
-                    splits: np.ndarray, overlap: float
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The culling volumes of the shadowed lights ``rows`` (DESIGN "Casters"): for a point or
-    spot light one hull of its position and each camera's frustum (volume k = camera k);
-    for a directional light each camera's cascade slices [a_c, z_c+1] swept towards the
-    light (volume k*C + c, its caster_masks bit). Returns (normals, points, counts, shared
-    leading planes per camera; see ``_volumes``)."""
-    cams = (frames.position, frames.basis, frames.tan_xy, frames.plane_n, frames.plane_p,
-            frames.near_far)
-    return _volumes(rows, (lights.type, lights.position, lights.direction), cams, splits,
-                    overlap)
+                    splits: np.ndarray, overlap: float) -> Volumes:
+    """The culling volumes of the shadowed lights ``rows`` (DESIGN section 2, "Casters"):
+    for a point or spot light one hull of its position and each camera's frustum (volume
+    k = camera k); for a directional light each camera's cascade slices [a_c, z_c+1] swept
+    towards the light (volume k*C + c, its caster_masks bit)."""
+    return Volumes(*_volumes(rows, lights.type, lights.position, lights.direction,
+                             frames.arrays(), splits, overlap))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -328,18 +353,20 @@ def _block_in_planes(vn, vq, t, b, first, end, lead, box, inside):
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def sweep_casters(lo, hi, casts, omask, lmask, vols):
-    """caster_masks of every object for each directional light t (parallel over blocks of
-    SWEEP_BLOCK objects): bit b set iff the object casts, its mask matches lmask[t] and its
-    box [lo, hi] is in volume b (camera*C + cascade sweep); vols = (normals, points,
-    counts, shared) from ``culling_volumes``, the shared leading planes tested once per
-    camera. Returns bits [T, N] uint32.
+    """caster_masks of every object for each directional light t (DESIGN section 2,
+    "Casters"; parallel over blocks of SWEEP_BLOCK objects): bit b set iff the object
+    casts, its mask matches lmask[t] and its box [lo, hi] is in volume b (camera*C +
+    cascade sweep). lo, hi [N, 3] float64, casts [N] bool, omask [N]: the objects' boxes,
+    casts_shadows and masks; lmask [T] int64: the lights' masks; vols: Volumes of the T
+    lights (culling_volumes), the shared leading planes tested once per camera. Returns
+    bits [T, N] uint32.
 
     A shadow distance is small beside a large scene, so most boxes are rejected, each by
     whichever plane it lies outside of. Box by box with an early exit (the version before
     this one) the loop does not vectorise; plane by plane over blocks of boxes copied into
     columns (``_block_in_planes``), each block left once it is empty, it does, and most of
     what remains is the copy (bench/RESULTS.md, issue 6)."""
-    vm, shared = vols[2], vols[3]
+    vm, shared = vols.vm, vols.shared
     n = lo.shape[0]
     bits = np.empty((lmask.shape[0], n), np.uint32)
     n_blocks = (n + SWEEP_BLOCK - 1) // SWEEP_BLOCK
@@ -356,16 +383,19 @@ def sweep_casters(lo, hi, casts, omask, lmask, vols):
         for blk in range(n_blocks * part // n_parts, n_blocks * (part + 1) // n_parts):
             o0 = blk * SWEEP_BLOCK
             m = min(n, o0 + SWEEP_BLOCK) - o0
-            _sweep_block(lo, hi, casts, omask, lmask, vols, o0,
-                         (box[:, :m], base[:m], in_cam[:m], inside[:m], acc[:m]),
-                         (lead, lead_shared), bits)
+            _sweep_block(lo, hi, casts, omask, lmask, vols, o0, box[:, :m], base[:m],
+                         in_cam[:m], inside[:m], acc[:m], lead, lead_shared, bits)
     return bits
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
-    """sweep_casters on the boxes o0.. of one block (scratch sized to the block)."""
-    box, base, in_cam, inside, acc = scratch
+def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, box, base, in_cam, inside, acc, lead,
+                 lead_shared, bits):
+    """sweep_casters on the boxes o0.. of one block: box [6, m], base, in_cam, inside [m]
+    bool and acc [m] uint32 its scratch, sized to the block (_block_masks); lead,
+    lead_shared the part's first planes (_block_masks); bits as sweep_casters returns
+    it. (Separate arrays: a tuple of them would be built inside sweep_casters' parallel
+    loop.)"""
     m = acc.shape[0]
     for r in range(m):
         for a in range(3):
@@ -374,19 +404,19 @@ def _sweep_block(lo, hi, casts, omask, lmask, vols, o0, scratch, leads, bits):
     for t in range(lmask.shape[0]):
         for r in range(m):
             base[r] = casts[o0 + r] and (np.int64(omask[o0 + r]) & lmask[t]) != 0
-        _block_masks(vols, t, box, (base, in_cam, inside, acc), leads)
+        _block_masks(vols, t, box, base, in_cam, inside, acc, lead, lead_shared)
         bits[t, o0:o0 + m] = acc
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _block_masks(vols, t, box, masks, leads):
-    """acc[r] = the caster mask of light t of box r of a block (box [6, m] in columns, as
-    _block_in_planes reads them), 0 where base[r] is False: per camera its shared planes,
-    then each cascade's own. masks = (base, in_cam, inside, acc), bool, bool, bool, uint32
-    [m] (the middle two scratch); leads as _sweep_block's."""
-    vn, vq, vm, shared = vols
-    base, in_cam, inside, acc = masks
-    lead, lead_shared = leads
+def _block_masks(vols, t, box, base, in_cam, inside, acc, lead, lead_shared):
+    """acc[r] = the caster mask of light t of box r of a block (DESIGN section 2,
+    "Casters"), 0 where base[r] is False: per camera its shared planes, then each
+    cascade's own. vols: Volumes; box [6, m]: the block in columns, as _block_in_planes
+    reads them; base, in_cam, inside [m] bool (the middle two scratch), acc [m] uint32;
+    lead [T, V], lead_shared [T, C] int64: per volume and per camera's shared planes, the
+    plane that emptied the last block (-1: none), tried first and updated here."""
+    vn, vq, vm, shared = vols.vn, vols.vq, vols.vm, vols.shared
     n_cam = shared.shape[1]
     n_casc = vm.shape[1] // n_cam
     acc[:] = 0
@@ -429,12 +459,13 @@ def _in_sweep(vn, vq, vm, shared, t, k, n_casc, lo, hi, v):
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def sweep_groups(casts, omask, lmask, vols, at, gbox):
-    """sweep_casters' caster masks over a grid of every object, a group box at a time: a
-    group of SWEEP_GROUP grid positions whose box ``gbox`` (group_boxes) is in none of a
-    light's volumes holds no caster of it and is skipped; the boxes of the others take the
-    test plane by plane, copied into columns (_block_masks, as sweep_casters' blocks). at =
-    (lo, hi, rows, by_row) as in group_boxes (rows: the object row of each position).
-    Returns (offsets [T + 1], object rows, caster masks): light t's casters at
+    """sweep_casters' caster masks (DESIGN section 2, "Casters") over a grid of every
+    object, a group box at a time: a group of SWEEP_GROUP grid positions whose box
+    ``gbox`` [G, 6] (grid.group_boxes) is in none of a light's volumes holds no caster of
+    it and is skipped; the boxes of the others take the test plane by plane, copied into
+    columns (_block_masks, as sweep_casters' blocks). casts, omask, lmask as in
+    sweep_casters; vols: Volumes; at: grid.BoxSource (rows: the object row of each
+    position). Returns (offsets [T + 1], object rows, caster masks): light t's casters at
     offsets[t]..offsets[t+1]-1, rows ascending, the nonzero entries of sweep_casters'.
 
     Exact, not approximate: each plane test is the same float64 expression at the box
@@ -444,8 +475,8 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
     signed distance at least theirs: a plane the group box fails, each of them fails
     (bench/RESULTS.md, issue 6). Groups go to the parallel parts in turn (part p takes
     groups p, p + parts, ...): the few a shadow distance keeps lie together in the grid."""
-    vn, vq, vm, shared = vols
-    lo, hi, rows, by_row = at
+    vn, vq, vm, shared = vols.vn, vols.vq, vols.vm, vols.shared
+    lo, hi, rows, by_row = at.lo, at.hi, at.rows, at.by_row
     n_t = lmask.shape[0]
     n_cam = shared.shape[1]
     n_casc = vm.shape[1] // n_cam
@@ -467,7 +498,8 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
         base, in_cam, inside = (np.empty(SWEEP_GROUP, np.bool_), np.empty(SWEEP_GROUP, np.bool_),
                                 np.empty(SWEEP_GROUP, np.bool_))
         acc = np.empty(SWEEP_GROUP, np.uint32)
-        leads = (np.full(vm.shape, -1, np.int64), np.full(shared.shape, -1, np.int64))
+        lead = np.full(vm.shape, -1, np.int64)
+        lead_shared = np.full(shared.shape, -1, np.int64)
         for g in range(part, n_g, n_parts):
             v0 = g * SWEEP_GROUP
             m = min(nv, v0 + SWEEP_GROUP) - v0
@@ -489,8 +521,8 @@ def sweep_groups(casts, omask, lmask, vols, at, gbox):
                 for r in range(m):
                     o = rows[v0 + r]
                     base[r] = casts[o] and (np.int64(omask[o]) & lmask[t]) != 0
-                _block_masks(vols, t, box[:, :m], (base[:m], in_cam[:m], inside[:m], acc[:m]),
-                             leads)
+                _block_masks(vols, t, box[:, :m], base[:m], in_cam[:m], inside[:m], acc[:m],
+                             lead, lead_shared)
                 c = 0
                 for r in range(m):
                     bits[t, v0 + r] = acc[r]
@@ -569,17 +601,18 @@ def hidden_near(lo, hi, casts, visible, box):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, vn, vq, vm,
+def _caster(hot, lf, j, typ, t, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, vn, vq, vm,
             out_rows, out_mask, n):
-    """Appends (object row, caster mask) of grid position v for shadowed light ``light`` =
-    (row j, type, index t of its culling volumes) at n when it is a caster: casts_shadows,
-    mask, d2 <= r*r, then shadows.caster_bits. Returns the new n. box, box_rows, lo, hi:
-    the grid's records, their object rows and lo / hi views; casts, omask, w_lo, w_hi: the
-    store's casts_shadows, mask, bounds_min, bounds_max (in a grid of every object the
-    records of the invisible ones hold no SHOWN bit, so they pair with no light, but
-    invisible objects cast); vn, vq, vm: the culling volumes. The arrays come one by one: a tuple of
-    them unpacked once an object kept its reference counting in the walk."""
-    j, typ, t = light
+    """Appends (object row, caster mask) of grid position v for the shadowed light of
+    packed row j, of type ``typ``, whose culling volumes are index t of (vn, vq, vm), at n
+    when it is a caster (DESIGN section 2, "Casters"): casts_shadows, mask, d2 <= r*r,
+    then caster_bits. Returns the new n. hot, lf: PackedLights' arrays; box, box_rows, lo,
+    hi: the grid's records, their object rows and lo / hi views; casts, omask, w_lo, w_hi:
+    CasterObjects' arrays, the store's (in a grid of every object the records of the
+    invisible ones hold no SHOWN bit, so they pair with no light, but invisible objects
+    cast); vn, vq, vm: Volumes' arrays; out_rows, out_mask: CasterLists'. The arrays come
+    one by one: a tuple of them unpacked once an object kept its reference counting in the
+    walk."""
     o = box_rows[v]
     if not casts[o] or np.int64(omask[o]) & np.int64(hot[j, 4]) == 0:
         return n
@@ -596,39 +629,40 @@ def _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi, 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
-    """Casters (DESIGN "Casters") of the shadowed point and spot lights ``rows`` (parallel)
-    among the objects of a grid built like the light pass's (visible_order /
+    """Casters (DESIGN section 2, "Casters") of the shadowed point and spot lights ``rows``
+    (parallel) among the objects of a grid built like the light pass's (visible_order /
     visible_objects): each light walks the same column runs as ``light_pass``
     (walk.light_runs) and keeps the objects that pass ``_caster``. lights: PackedLights;
-    grid: GridIndex; vols = culling volumes indexed like rows; recs: the grid's Records
-    (rows: object rows of the store); objects = (casts_shadows,
-    mask, bounds_min, bounds_max) of the store, whose world boxes meet the culling volumes (the
-    records may be relative to the first camera); out = (object rows, caster masks), light t
-    writing from offsets[t] (``light_bounds`` on this grid). Returns the count per light;
-    a light's rows come ascending (sorted here, per light: the frame keeps them as they
-    are)."""
-    # Every tuple unpacked here: arrays taken out of a tuple inside the parallel loop were
+    rows [T] int64: their packed rows; grid: GridIndex; recs: the grid's Records (rows:
+    object rows of the store); objects: CasterObjects of the store, whose world boxes meet
+    the culling volumes (the records may be relative to the first camera); vols: Volumes
+    indexed like rows; out: CasterLists, light t writing from offsets[t] (``light_bounds``
+    on this grid). Returns the count per light; a light's rows come ascending (sorted
+    here, per light: the frame keeps them as they are)."""
+    # Every field read here: arrays taken out of a tuple inside the parallel loop were
     # written to copies (numba 0.68 parfors), and the stores were lost.
-    hot, lf = lights
-    g_f, dims, cell_start, ext, big_pos = grid
-    box, box_rows = recs[0], recs[2]
+    hot, lf = lights.hot, lights.f
+    g_f, dims, cell_start = grid.frame, grid.dims, grid.cell_start
+    ext, big_pos = grid.ext, grid.big_pos
+    box, box_rows = recs.box, recs.rows
     lo, hi = box[:, 0:3], box[:, 3:6]
-    casts, omask, w_lo, w_hi = objects
-    vn, vq, vm = vols[0], vols[1], vols[2]
-    out_rows, out_mask = out
+    casts, omask, w_lo, w_hi = objects.casts, objects.mask, objects.lo, objects.hi
+    vn, vq, vm = vols.vn, vols.vq, vols.vm
+    out_rows, out_mask = out.rows, out.masks
     count = np.zeros(rows.shape[0], np.int64)
     for t in nb.prange(rows.shape[0]):
         j = rows[t]
-        light = (j, (np.int64(hot[j, 5]) >> 3) & 3, np.int64(t))
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        t_vol = np.int64(t)
         n = offsets[t]
         m, runs = light_runs(hot, j, g_f, dims, cell_start, ext, np.empty((16, 2), np.int64))
         for i in range(m):
             for v in range(runs[i, 0], runs[i, 1]):
-                n = _caster(hot, lf, light, v, box, box_rows, casts, omask, lo, hi, w_lo, w_hi,
-                            vn, vq, vm, out_rows, out_mask, n)
+                n = _caster(hot, lf, j, typ, t_vol, v, box, box_rows, casts, omask, lo, hi, w_lo,
+                            w_hi, vn, vq, vm, out_rows, out_mask, n)
         for b in range(big_pos.shape[0]):
-            n = _caster(hot, lf, light, big_pos[b], box, box_rows, casts, omask, lo, hi, w_lo,
-                        w_hi, vn, vq, vm, out_rows, out_mask, n)
+            n = _caster(hot, lf, j, typ, t_vol, big_pos[b], box, box_rows, casts, omask, lo, hi,
+                        w_lo, w_hi, vn, vq, vm, out_rows, out_mask, n)
         a = offsets[t]
         order = np.argsort(out_rows[a:n])
         sorted_rows, sorted_mask = out_rows[a:n][order], out_mask[a:n][order]
@@ -642,7 +676,7 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
 # --------------------------------------------------------------------------- the casters stage
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Casters:
     """The casters stage's output: caster_offsets, caster_ids and caster_masks of the
     shadow lights in rank order (DESIGN section 3); ``by_light``: per shadow light row its
@@ -695,7 +729,7 @@ class _Finder:
 
     lights: LightStore
     objects: ObjectStore
-    packed: tuple[np.ndarray, np.ndarray]
+    packed: PackedLights
     grid: Grid
     frame: tuple[np.ndarray, bool]
     visible: np.ndarray
@@ -750,14 +784,14 @@ class _Finder:
         return Casters(offsets, ids, masks, dict(zip(shadow_rows.tolist(), found, strict=True)),
                        "; ".join(plan))
 
-    def _suns(self, rows_t: np.ndarray, sun: list[int], todo: list[int], vols: tuple,
+    def _suns(self, rows_t: np.ndarray, sun: list[int], todo: list[int], vols: Volumes,
               found: list) -> str:
         """The casters of the directional lights ``sun`` (indices into rows_t) into
         ``found``; returns the plan's words for them."""
         objs, grid = self.objects, self.grid
         vn, vq, vm, shared = vols
         lmask = self.lights.mask[rows_t[sun]].astype(np.int64)
-        sun_vols = (vn[sun], vq[sun], vm[sun], shared[sun])
+        sun_vols = Volumes(vn[sun], vq[sun], vm[sun], shared[sun])
         lo, hi, casts = objs.bounds_min, objs.bounds_max, objs.casts_shadows
         if grid.shown is not None:
             # A grid of every object: its group boxes first.
@@ -776,7 +810,7 @@ class _Finder:
             found[todo[t]] = (rows, bits[i][rows])
         return f"{len(sun)} directional: every object against {vm.shape[1]} cascade sweeps"
 
-    def _patched(self, rows_t: np.ndarray, patched: list[int], todo: list[int], vols: tuple,
+    def _patched(self, rows_t: np.ndarray, patched: list[int], todo: list[int], vols: Volumes,
                  found: list, cached: dict, rows_p: np.ndarray) -> str:
         """The directional lights ``patched`` keep their cached lists but at the changed
         object rows ``rows_p``, which alone they sweep."""
@@ -785,7 +819,7 @@ class _Finder:
         bits = sweep_casters(objs.bounds_min[rows_p], objs.bounds_max[rows_p],
                              objs.casts_shadows[rows_p], objs.mask[rows_p],
                              self.lights.mask[rows_t[patched]].astype(np.int64),
-                             (vn[patched], vq[patched], vm[patched], shared[patched]))
+                             Volumes(vn[patched], vq[patched], vm[patched], shared[patched]))
         changed = np.zeros(len(objs), np.bool_)
         changed[rows_p] = True
         for i, t in enumerate(patched):
@@ -799,13 +833,13 @@ class _Finder:
         return (f"{len(patched)} directional: the {rows_p.size} changed objects against "
                 f"{vm.shape[1]} cascade sweeps, the others' kept")
 
-    def _locals(self, rows_t: np.ndarray, local: list[int], todo: list[int], vols: tuple,
+    def _locals(self, rows_t: np.ndarray, local: list[int], todo: list[int], vols: Volumes,
                 found: list) -> str:
         """The casters of the point and spot lights ``local`` (indices into rows_t)."""
         grid = self.grid
         rows_l = rows_t[local].astype(np.int64)
         if len(local) < len(todo):
-            vols = tuple(v[local] for v in vols)
+            vols = Volumes(*(v[local] for v in vols))
         part = self._in_grid(rows_l, grid.index, grid.records, vols)
         if grid.shown is not None:
             for i, t in enumerate(local):
@@ -822,7 +856,7 @@ class _Finder:
         return (f"{len(local)} point/spot: the grid of visible objects, then a grid of {nh} "
                 "invisible casting objects near them")
 
-    def _hidden(self, rows: np.ndarray, vols: tuple
+    def _hidden(self, rows: np.ndarray, vols: Volumes
                 ) -> tuple[list[tuple[list[np.ndarray], list[np.ndarray]]], int]:
         """For a grid of the visible objects only: the casters of the point and spot
         lights ``rows`` among the invisible casting objects near their spheres, from a
@@ -846,14 +880,17 @@ class _Finder:
             self.frame)
         return [self._in_grid(rows, index, recs._replace(rows=hidden[recs.rows]), vols)], nh
 
-    def _in_grid(self, rows: np.ndarray, index: GridIndex, recs: Records, vols: tuple
+    def _in_grid(self, rows: np.ndarray, index: GridIndex, recs: Records, vols: Volumes
                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per light of ``rows``, (object rows, masks) of its casters in one grid."""
-        offsets = light_bounds(self.packed[0], rows, index, recs.box.shape[0])
-        out = (np.empty(int(offsets[-1]), np.int64), np.empty(int(offsets[-1]), np.uint32))
+        offsets = light_bounds(self.packed.hot, rows, index, recs.box.shape[0])
+        out = CasterLists(np.empty(int(offsets[-1]), np.int64),
+                          np.empty(int(offsets[-1]), np.uint32))
         objs = self.objects
         count = grid_casters(self.packed, rows, index, recs,
-                             (objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
+                             CasterObjects(objs.casts_shadows, objs.mask, objs.bounds_min,
+                                           objs.bounds_max),
                              vols, offsets, out)
         spans = list(zip(offsets.tolist(), count.tolist(), strict=False))
-        return [out[0][a:a + m] for a, m in spans], [out[1][a:a + m] for a, m in spans]
+        return ([out.rows[a:a + m] for a, m in spans],
+                [out.masks[a:a + m] for a, m in spans])

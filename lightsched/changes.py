@@ -1,4 +1,4 @@
-"""What changed since the last frame (DESIGN section 6, "dirty tracking").
+"""What changed since the last frame (DESIGN section 6: only what moved is recomputed).
 
 Takes the arrays the last frame read (a scheduler keeps references to them: stores never
 change an array in place, they copy on write) and the stores as they are now; returns the
@@ -23,7 +23,7 @@ from .scene import LIGHT_FIELDS, OBJECT_FIELDS, Camera
 PAIR_OBJECT_FIELDS = ("id", "bounds_min", "bounds_max", "mask")
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Changes:
     """What differs from the last frame's scene. ``lights`` and ``objects``: the stores'
     arrays this frame reads (the next frame compares against them); the rows are None

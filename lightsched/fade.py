@@ -64,7 +64,9 @@ def steady_slots(sf, si, nsel):
     slots were all on and hold exactly its selection gets the same from held_slots. Each
     light's place is the number of lights that rank before it: compares only, no branch
     on the data (an insertion sort mispredicts about once per light on random
-    priorities, and step 3 has no earlier order to start from)."""
+    priorities, and step 3 has no earlier order to start from). sf: float64 [F_ROWS, K],
+    si: int64 [I_ROWS, K]: the object's scratch (select.py); nsel: the selection's size.
+    DESIGN section 2, "Fade" (step 3 and the output order)."""
     for i in range(nsel):
         p = sf[F_P, i]
         lid = si[I_ID, i]
@@ -82,7 +84,9 @@ def held_slots(sf, si, nsel):
     by an insertion sort from last frame's order, written to the new-slot rows. Last
     frame's slots are in last frame's output order and P moves little between frames, so
     the sort's compares mostly stop at once: ~nsel compares where steady_slots' rank
-    counts take nsel^2 (a sampling profile put those at a sixth of the object pass)."""
+    counts take nsel^2 (a sampling profile put those at a sixth of the object pass).
+    sf, si, nsel as steady_slots'. DESIGN section 2, "Fade" (steps 1-2 when nothing
+    changes but P, and the output order)."""
     for i in range(nsel):
         lid = si[I_OLD_ID, i]
         p = sf[F_OLD_P, i]
@@ -100,7 +104,10 @@ def fade_object(sf, si, nsel, reset, inc, dec, fade_in, fade_out):
     """Selected set in rows (I_ID, F_P, I_ROW)[:nsel]; last frame's slots in (I_OLD_ID,
     F_OLD_W, I_OLD_ST) with this frame's (F_OLD_P, I_OLD_ROW); writes the new slots to
     (I_NEW_ID, F_NEW_W, I_NEW_ST, F_NEW_P, I_NEW_ROW) in output order. inc = dt/fade_in,
-    dec = dt/fade_out."""
+    dec = dt/fade_out. sf: float64 [F_ROWS, K], si: int64 [I_ROWS, K]: the object's
+    scratch (select.py); nsel: the selection's size; reset: bool, step 3 applies (then
+    steady_slots); fade_in, fade_out: Config's, in seconds (0: at once). Returns the
+    number of occupied slots. DESIGN section 2, "Fade" (steps 1-3, weights, output order)."""
     k = sf.shape[1]
     cnt = 0
     if reset:

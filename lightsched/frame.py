@@ -98,7 +98,10 @@ def empty_frame(ids: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:
 def rows_differ(x, x_rows, y, y_rows, changed):
     """changed[i] |= row x_rows[i] of x [., W] differs from row y_rows[i] of y, or
     y_rows[i] < 0 (no such row); an empty x_rows or y_rows stands for row i. Frames compare
-    rows remapped by id; the change detection of changes.py the rows an update touched."""
+    rows remapped by id; the change detection of changes.py the rows an update touched.
+    x, y: 2-d arrays of words (row_words); x_rows, y_rows: int64; changed: bool [n], in
+    place. DESIGN section 3 (rows by object id) and section 6 (nothing moved, nothing
+    recomputed: changes.py's dirty tracking)."""
     for i in range(changed.shape[0]):
         if changed[i]:
             continue
@@ -146,7 +149,9 @@ def row_words(a: np.ndarray) -> np.ndarray:
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def copy_rows(src, dst, rows):
-    """dst[r] = src[r] for the rows ``rows`` of two [N, W] arrays (parallel)."""
+    """dst[r] = src[r] for the rows ``rows`` (int64) of two [N, W] arrays (parallel): an
+    incremental frame's per-object outputs (DESIGN section 3) keep last frame's rows where
+    it does not write them (DESIGN section 6)."""
     for i in nb.prange(rows.shape[0]):
         r = rows[i]
         for w in range(src.shape[1]):
@@ -156,7 +161,8 @@ def copy_rows(src, dst, rows):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def rows_not_in(rows, other):
     """The rows of ``rows`` not in ``other`` (both int64, ascending, distinct), ascending:
-    a merge, where a mask of every row took three passes over it."""
+    a merge, where a mask of every row took three passes over it. DESIGN section 6 (the
+    rows of an incremental frame's outputs to copy from last frame's)."""
     out = np.empty(rows.shape[0], np.int64)
     n = 0
     t = 0

@@ -8,13 +8,14 @@ cells its box overlaps in a grid of the point and spot lights (``light_grid``,
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
 
 from .candidates import candidate_pairs, scalar_candidates
-from .grid import _axis_cells, _cell, visible_objects
+from .grid import Records, _axis_cells, _cell, visible_objects
+from .group import PairHeap
 from .jit import PRANGE_ONLY
 from .priority import MODEL_CONTRIBUTION, PairParams
 from .simd import SHOWN, candidate_run
@@ -28,27 +29,43 @@ LIGHT_GRID_BIG = 64          # a light over more cells is tested by every object
 FRESH_CHUNK = 512            # objects per parallel work item of grid_pairs
 
 
+class LightGrid(NamedTuple):
+    """The point and spot lights sorted into a grid of cubic cells (light_grid)."""
+
+    frame: np.ndarray       # float64 [6]: the origin of cell (0, 0, 0), 1/edge per axis
+    dims: np.ndarray        # int64 [3]: cells per axis
+    cell_start: np.ndarray  # int64 [C + 1]: cell c's lights at light_row[start[c]:start[c+1]]
+    light_row: np.ndarray   # int32: the light rows of each cell
+    big: np.ndarray         # int32: the rows over LIGHT_GRID_BIG cells, which every object tests
+
+
+class FoundLists(NamedTuple):
+    """Per record r the candidate light rows grid_pairs found for it: light_row[seg[r, 0]:]
+    [:seg[r, 1]] (the fields of candidates.CandidateLists that candidate_pairs reads)."""
+
+    seg: np.ndarray        # int64 [F, 2]: start, length
+    light_row: np.ndarray  # int32
+
+
 def fresh_object_pairs(rows: np.ndarray, objects: ObjectStore, packed: Packed,
                        params: PairParams, frame: tuple[np.ndarray, bool],
-                       cells: tuple | None) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+                       cells: LightGrid | None) -> tuple[np.ndarray, PairHeap]:
     """The pairs of the object ``rows`` (ascending) with every competing light, each object
     tested against all of them (direct_pairs) or, given a grid of the lights ``cells``,
-    against those of the cells its box overlaps (grid_pairs), as (start [N + 1], (P,
-    light row)) grouped by object row: valid at ``rows`` and the row after each, which is
-    all that pair_cache.replace_lists reads of them. frame = (origin, single) of the
-    records."""
-    recs = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
-    bits = recs.view(np.uint32 if frame[1] else np.uint64)
+    against those of the cells its box overlaps (grid_pairs), as (start [N + 1], PairHeap)
+    grouped by object row: valid at ``rows`` and the row after each, which is all that
+    pair_cache.replace_lists reads of them. frame = (origin, single) of the records."""
+    box = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
+    recs = Records(box, box.view(np.uint32 if frame[1] else np.uint64), rows)
     visible_objects(objects.bounds_min, objects.bounds_max, objects.mask, rows, rows.size,
-                    (recs, bits), frame[0])
+                    recs, frame[0])
     compete, is_dir = packed.compete, packed.is_dir
     dir_rows = np.flatnonzero(compete & is_dir)
     if cells is not None:
-        return grid_pairs(rows, (recs, bits), packed.rows, compete, cells, dir_rows, params,
-                          len(objects))
+        return grid_pairs(recs, packed.rows, compete, cells, dir_rows, params, len(objects))
     point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
-    return direct_pairs(rows, (recs, bits), packed.rows, compete, point_rows, dir_rows,
-                        params, len(objects))
+    return direct_pairs(recs, packed.rows, compete, point_rows, dir_rows, params,
+                        len(objects))
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -56,21 +73,21 @@ def _vector_rows(params, box, lights):
     """Whether simd.candidate_run takes these pairs: the contribution model and whole
     8-word rows of records and lights, which it reads."""
     return (params.model == MODEL_CONTRIBUTION and box.shape[1] == 8
-            and lights[0].shape[1] == 8 and lights[1].shape[1] == 8)
+            and lights.hot.shape[1] == 8 and lights.f.shape[1] == 8)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params, vector):
-    """The pairs of record o of recs = (boxes, integer view) with the candidate light rows
-    c_j[a:b] (cands = (c_j, a, b)) and the directional ``dir_rows``, appended from m to
-    (o_p, o_j); returns the new end. ``vector``: the records and light rows are 8-word
-    float64 rows under the contribution model, which simd.candidate_run takes eight
-    candidates at a time. candidate_pairs keeps its own copy of these lines: calling this
-    from its parallel loop made a full frame's candidates' pass slower in paired runs,
-    though not on captured inputs."""
-    box, bits = recs
-    hot, lf = lights
-    c_j, a, b = cands
+def _record_pairs(o, recs, lights, compete, c_j, a, b, dir_rows, out, m, params, vector):
+    """The pairs of record o of recs (grid.Records) with the candidate light rows c_j[a:b]
+    and the directional ``dir_rows``, appended from m to ``out`` (PairHeap); returns the
+    new end. ``vector``: the records and light rows are 8-word float64 rows under the
+    contribution model, which simd.candidate_run takes eight candidates at a time.
+    candidate_pairs keeps its own copy of these lines: calling this from its parallel
+    loop made a full frame's candidates' pass slower in paired runs, though not on
+    captured inputs."""
+    box, bits = recs.box, recs.bits
+    hot, lf = lights.hot, lights.f
+    o_p, o_j = out.p, out.light_row
     ob = np.int64(bits[o, 6]) & SHOWN
     # An object out of view (no SHOWN bit in its record) keeps its list but pairs with none.
     if ob == 0:
@@ -81,7 +98,7 @@ def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params
         if end >= 0:
             a = b
             m = end
-    m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, (o_p, o_j), m, params)
+    m = scalar_candidates(box, ob, o, lights, compete, c_j, a, b, out, m, params)
     for d in range(dir_rows.shape[0]):
         j = dir_rows[d]
         if ob & np.int64(hot[j, 4]) != 0:
@@ -92,47 +109,49 @@ def _record_pairs(o, recs, lights, compete, cands, dir_rows, o_p, o_j, m, params
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def direct_pairs(rows, recs, lights, compete, point_rows, dir_rows, params, n):
+def direct_pairs(recs, lights, compete, point_rows, dir_rows, params, n):
     """The pairs of a few objects that came into view, each tested against every competing
     light (candidate_pairs' rule with every point and spot light ``point_rows`` a
     candidate): one object a step on the calling thread, no grid. An incremental frame with
     a camera move brings a handful of objects into view; a grid of them walked by every
     light costs, even for one object, the grid's O(N) pass over the rows and every light's
-    cell ranges and runs. rows = object rows ascending, recs = their records
-    in that order; lights, compete, params as candidate_pairs. Returns (start [n + 1],
-    (P, light row)): object rows[r]'s pairs at start[rows[r]]..start[rows[r] + 1], the
-    only entries of start written."""
-    vector = _vector_rows(params, recs[0], lights)
+    cell ranges and runs. recs: grid.Records of the objects, rows ascending; lights,
+    compete, params as candidate_pairs. DESIGN section 2 ("Affects", "Priority"). Returns
+    (start [n + 1], PairHeap): object rows[r]'s pairs at start[rows[r]]..start[rows[r] +
+    1], the only entries of start written."""
+    rows = recs.rows
+    vector = _vector_rows(params, recs.box, lights)
     room = rows.shape[0] * (point_rows.shape[0] + dir_rows.shape[0])
-    o_p = np.empty(room)
-    o_j = np.empty(room, np.int32)
+    out = PairHeap(np.empty(room), np.empty(room, np.int32))
     start = np.empty(n + 1, np.int64)
     m = 0
     for r in range(rows.shape[0]):
         start[rows[r]] = m
-        m = _record_pairs(r, recs, lights, compete, (point_rows, 0, point_rows.shape[0]),
-                          dir_rows, o_p, o_j, m, params, vector)
+        m = _record_pairs(r, recs, lights, compete, point_rows, 0, point_rows.shape[0],
+                          dir_rows, out, m, params, vector)
         start[rows[r] + 1] = m
-    return start, (o_p[:m], o_j[:m])
+    return start, PairHeap(out.p[:m], out.light_row[:m])
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def light_grid(hot, rows):
     """The spheres of the point and spot light ``rows`` of light_hot sorted into a grid of
-    cubic cells: (g_f [6] (origin, 1/edge per axis as grid_shape), dims [3], cell_start
-    [C + 1], the light rows of each cell int32, the rows over LIGHT_GRID_BIG cells int32,
-    which every object tests). The edge is twice the median radius (of at most 1024 of
+    cubic cells: a LightGrid. The edge is twice the median radius (of at most 1024 of
     them, evenly spaced), so a light spans ~2 cells an axis, made larger until there are
     at most LIGHT_GRID_CELLS cells per light. A sphere's cell range is widened as
     _axis_cells widens it, so rounding never drops a light the exact test keeps.
 
     Much finer cells make the city's larger objects span many cells, coarser ones give
-    each object more lights to test (bench/RESULTS.md, "Measurements behind the code")."""
+    each object more lights to test (bench/RESULTS.md, "Measurements behind the code").
+
+    hot: light_hot [L, 8] float64 (priority.PackedLights.hot); rows: int32 light rows.
+    DESIGN section 6 (a grid instead of brute force, for the objects that moved)."""
     n = rows.shape[0]
     g_f = np.zeros(6)
     dims = np.ones(3, np.int64)
     if n == 0:
-        return g_f, dims, np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32)
+        return LightGrid(g_f, dims, np.zeros(2, np.int64), np.zeros(0, np.int32),
+                         np.zeros(0, np.int32))
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     radii = np.empty(n)
@@ -190,7 +209,7 @@ def light_grid(hot, rows):
                     c = (x * dims[1] + y) * dims[2] + z
                     cell_rows[at[c]] = rows[t]
                     at[c] += 1
-    return g_f, dims, count, cell_rows, big
+    return LightGrid(g_f, dims, count, cell_rows, big)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -206,8 +225,10 @@ def _box_cells(box, r, g_f, dims):
 def _grid_candidates(r, box, lgrid, seen, out, m):
     """The candidate light rows of record r of ``box`` in a grid of lights (light_grid):
     the big lights, then those of the cells its box overlaps, each once (``seen``: the last
-    record that took each light row), written from m into ``out``; returns the new end."""
-    g_f, dims, cell_start, cell_rows, big = lgrid
+    record that took each light row), written from m into ``out``; returns the new end.
+    lgrid: LightGrid."""
+    g_f, dims, cell_start, cell_rows, big = (lgrid.frame, lgrid.dims, lgrid.cell_start,
+                                             lgrid.light_row, lgrid.big)
     for j in big:
         out[m] = j
         m += 1
@@ -229,7 +250,7 @@ def _grid_bound(r, box, lgrid):
     """At least the number of _grid_candidates of record r: the big lights and every entry
     of the cells its box overlaps (a light in several of them counted each time), from the
     cells' starts alone."""
-    g_f, dims, cell_start, _, big = lgrid
+    g_f, dims, cell_start, big = lgrid.frame, lgrid.dims, lgrid.cell_start, lgrid.big
     x0, y0, z0, x1, y1, z1 = _box_cells(box, r, g_f, dims)
     m = big.shape[0]
     for x in range(x0, x1 + 1):
@@ -240,18 +261,23 @@ def _grid_bound(r, box, lgrid):
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
+def grid_pairs(recs, lights, compete, lgrid, dir_rows, params, n):
     """direct_pairs with each object's candidates from a grid of the point and spot lights
     (light_grid): the lights of the cells its box overlaps, and the big ones. The same
     pairs, in another order within an object. The candidates are listed in parallel over
     blocks of FRESH_CHUNK objects, each into a room sized from the cells' starts
     (_grid_bound), tested by candidate_pairs (its stream, eight candidates a step across
-    objects: one object at a time was slower), and the pairs packed in object order."""
-    n_l = lights[0].shape[0]
+    objects: one object at a time was slower), and the pairs packed in object order.
+    lgrid: LightGrid; dir_rows: int64, the competing directional light rows; n: the object
+    count; recs (grid.Records), compete, params and the result as direct_pairs'. DESIGN
+    section 2 ("Affects", "Priority") on the objects of DESIGN section 6 that moved or
+    came into view."""
+    rows = recs.rows
+    n_l = lights.hot.shape[0]
     f = rows.shape[0]
     n_chunks = (f + FRESH_CHUNK - 1) // FRESH_CHUNK
     c_seg = np.zeros((f, 2), np.int64)
-    box = recs[0]
+    box = recs.box
     for r in nb.prange(f):
         c_seg[r, 1] = _grid_bound(r, box, lgrid)
     total = 0
@@ -265,10 +291,10 @@ def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
             c_seg[r, 1] = _grid_candidates(r, box, lgrid, seen, c_j, c_seg[r, 0]) - c_seg[r, 0]
     room = total + f * dir_rows.shape[0]
     seg = np.empty((f, 2), np.int64)
-    o_p = np.empty(room)
-    o_j = np.empty(room, np.int32)
-    candidate_pairs(np.arange(f), (c_seg, c_j), recs, lights, compete, dir_rows, params,
-                    (seg, o_p, o_j), 0)
+    heap = PairHeap(np.empty(room), np.empty(room, np.int32))
+    o_p, o_j = heap.p, heap.light_row
+    candidate_pairs(np.arange(f), FoundLists(c_seg, c_j), recs, lights, compete, dir_rows,
+                    params, seg, heap, 0)
     start = np.empty(n + 1, np.int64)
     m = 0
     for r in range(f):
@@ -278,4 +304,4 @@ def grid_pairs(rows, recs, lights, compete, lgrid, dir_rows, params, n):
             o_j[m] = o_j[t]
             m += 1
         start[rows[r] + 1] = m
-    return start, (o_p[:m], o_j[:m])
+    return start, PairHeap(o_p[:m], o_j[:m])

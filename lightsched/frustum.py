@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -27,6 +28,17 @@ def _normalize(v: tuple[float, float, float]) -> tuple[float, float, float]:
 
 def _cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+class CameraArrays(NamedTuple):
+    """The arrays of a CameraFrames as a kernel takes them (casters._volumes), C cameras."""
+
+    position: np.ndarray  # float64 [C, 3]
+    basis: np.ndarray     # float64 [C, 3, 3]: rows f, r, u
+    tan_xy: np.ndarray    # float64 [C, 2]: (t_x, t_y)
+    plane_n: np.ndarray   # float64 [C, 6, 3]: inward unit normals, near far left right bottom top
+    plane_p: np.ndarray   # float64 [C, 6, 3]: a point of each plane, in the same order
+    near_far: np.ndarray  # float64 [C, 2]
 
 
 class CameraFrames:
@@ -72,8 +84,13 @@ class CameraFrames:
     def __len__(self) -> int:
         return self.position.shape[0]
 
+    def arrays(self) -> CameraArrays:
+        """The frames' arrays a kernel reads (the same arrays, not copies)."""
+        return CameraArrays(self.position, self.basis, self.tan_xy, self.plane_n, self.plane_p,
+                            self.near_far)
 
-@dataclass(frozen=True)
+
+@dataclass(slots=True)
 class Cameras:
     """The cameras stage's output: every parameter of the cameras as one key
     (changes.camera_key), their frames and cascade_splits, and whether they differ from
@@ -115,9 +132,10 @@ VISIBLE_BLOCK = 512
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
-    """visible[o] iff o's AABB is in at least one camera frustum: for every plane of it,
-    the box's corner farthest along the plane's normal n (hi on an axis where n >= 0, lo
-    elsewhere) is at a signed distance >= 0 (the conservative test). Also returns the
+    """visible[o] iff o's AABB (bounds_min, bounds_max [N, 3]) is in at least one camera
+    frustum (plane_n, plane_p [C, 6, 3]; DESIGN section 2, "Visibility", "Tests"): for
+    every plane of it, the box's corner farthest along the plane's normal n (hi on an axis
+    where n >= 0, lo elsewhere) is at a signed distance >= 0. Also returns the
     bounding box of the visible objects (lo, hi) [6], +-inf when none is visible, from
     per-block boxes so the reduction stays parallel.
 
@@ -143,7 +161,7 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
         for cam in range(plane_n.shape[0]):
             ok[:size] = True
             for j in range(6):
-                _plane_columns(plane_n, plane_p, (cam, j), col, size, ok)
+                _plane_columns(plane_n, plane_p, cam, j, col, size, ok)
             for i in range(size):
                 vis[i] = vis[i] | ok[i]
         b = _hull(boxes, 0)
@@ -158,12 +176,12 @@ def objects_visible(bounds_min, bounds_max, plane_n, plane_p):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _plane_columns(plane_n, plane_p, plane, col, size, ok):
-    """ok[i] &= box i in columns col ([lo, hi] rows of 6) passes plane = (camera, j): its
-    corner farthest along the normal (column a + 3 on an axis where n >= 0) at a signed
-    distance n . (x - q), summed in x, y, z order (DESIGN "Tests"), >= 0. One loop without
-    branches over contiguous columns, which LLVM vectorises."""
-    cam, j = plane
+def _plane_columns(plane_n, plane_p, cam, j, col, size, ok):
+    """ok[i] &= box i in columns col ([lo, hi] rows of 6, the first ``size`` taken) passes
+    plane j of camera ``cam`` (plane_n, plane_p [C, 6, 3]): its corner farthest along the
+    normal (column a + 3 on an axis where n >= 0) at a signed distance n . (x - q), summed
+    in x, y, z order, >= 0 (DESIGN section 2, "Tests"). One loop without branches over
+    contiguous columns, which LLVM vectorises."""
     n0, n1, n2 = plane_n[cam, j, 0], plane_n[cam, j, 1], plane_n[cam, j, 2]
     q0, q1, q2 = plane_p[cam, j, 0], plane_p[cam, j, 1], plane_p[cam, j, 2]
     c0 = 3 if n0 >= 0.0 else 0
@@ -235,6 +253,23 @@ ACROSS = 1
 IN = 2
 
 
+class GroupBoxes(NamedTuple):
+    """The groups of a grid of every object (grid.Grid's pos_of and group_box): group g
+    holds grid positions g*size..(g+1)*size-1."""
+
+    pos_of: np.ndarray  # int64 [N]: each object row's grid position
+    box: np.ndarray     # float64 [G, 6]: lo, hi round the boxes of the group's objects
+    size: int           # positions per group (grid.SWEEP_GROUP)
+
+
+class GroupPass(NamedTuple):
+    """What a pass of objects_visible_groups over a grid's positions left, for the next
+    pass over the same positions."""
+
+    visible: np.ndarray  # bool [N]: each object row's flag, as the pass left it
+    classes: np.ndarray  # int8 [G]: OUT, ACROSS or IN per group; size 0 for no pass
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _group_class(plane_n, plane_p, gbox, g):
     """IN when gbox[g] lies wholly inside some camera's frustum, OUT when it is in none
@@ -247,13 +282,13 @@ def _group_class(plane_n, plane_p, gbox, g):
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _across(plane_n, plane_p, gbox, g, col, m, out):
+def _across(plane_n, plane_p, gbox, g, col, m, seen, ok):
     """objects_visible's test of the m boxes in columns col ([lo, hi] rows of 6) of group
-    g, whose box gbox[g] is across a plane: out = (seen, ok) [>= m], seen the flags. Each
-    camera takes only the planes the group box is across: every object is inside a plane
-    the group box is wholly inside, and outside one it is wholly outside (the argument of
-    objects_visible_groups), so that camera sees none of them."""
-    seen, ok = out
+    g, whose box gbox[g] is across a plane (DESIGN section 2, "Visibility"): seen[:m] the
+    flags, ok [>= m] scratch. Each camera takes only the planes the group box is across:
+    every object is inside a plane the group box is wholly inside, and outside one it is
+    wholly outside (the argument of objects_visible_groups), so that camera sees none of
+    them."""
     seen[:m] = False
     for cam in range(plane_n.shape[0]):
         ok[:m] = True
@@ -262,26 +297,26 @@ def _across(plane_n, plane_p, gbox, g, col, m, out):
                 ok[:m] = False
                 break
             if not _plane_d(plane_n, plane_p, cam, j, gbox, g, False) >= 0.0:
-                _plane_columns(plane_n, plane_p, (cam, j), col, m, ok)
+                _plane_columns(plane_n, plane_p, cam, j, col, m, ok)
         for i in range(m):
             seen[i] = seen[i] | ok[i]
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def objects_visible_groups(at, plane_n, plane_p, groups, last):
-    """objects_visible over a grid of every object, a group of its positions at a time:
-    at = (lo, hi, rows, by_row) the boxes as shadows.group_boxes reads them: position v's
-    is row rows[v] of lo and hi if by_row, else row v (a grid's float64 records, in order:
-    the objects of a group are then read as one run, not from 64 random rows, cache misses
-    at large sizes); groups = (pos_of [N], each row's position; boxes
-    [G, 6], the box round each ``size`` consecutive positions' objects; size); last =
-    (visible [N], class [G]) of a pass over the same positions, its flags as it left them
-    (objects may have moved since within their group boxes), or a class of size 0 for
-    none. Returns (visible [N], a box holding the visible objects, class [G]): the box
-    is the IN groups' boxes and the visible objects' of the ACROSS ones, so it may be
-    larger than theirs (it only sets a grid's extent).
+    """objects_visible (DESIGN section 2, "Visibility", by the AABB test of "Tests") over a
+    grid of every object, a group of its positions at a time.
 
-    Exact, not approximate, as shadows.sweep_groups: the group box's corner nearest along
+    at: grid.BoxSource, the boxes as grid.group_boxes reads them (a grid's float64
+    records in order: the objects of a group are then read as one run, not from 64 random
+    rows, cache misses at large sizes); plane_n, plane_p [C, 6, 3]: the cameras' planes
+    (CameraFrames); groups: GroupBoxes of the grid; last: GroupPass of a pass over the
+    same positions (objects may have moved since within their group boxes), classes of
+    size 0 for none. Returns (visible [N], a box holding the visible objects, class [G]):
+    the box is the IN groups' boxes and the visible objects' of the ACROSS ones, so it may
+    be larger than theirs (it only sets a grid's extent).
+
+    Exact, not approximate, as casters.sweep_groups: the group box's corner nearest along
     a normal lies no further along it than any of its objects' farthest corners, and each
     operation of the distance (a difference, a product by the normal's component, a sum)
     rounds monotonically, so the group's distance is at most each object's; the same for
@@ -294,9 +329,9 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
     pos_of, so the parallel parts never write to one cache line at random rows (faster
     than objects_visible, which reads every object's bounds; bench/RESULTS.md,
     "Measurements behind the code")."""
-    lo, hi, rows, by_row = at
-    pos_of, gbox, size = groups
-    vis_last, class_last = last
+    lo, hi, rows, by_row = at.lo, at.hi, at.rows, at.by_row
+    pos_of, gbox, size = groups.pos_of, groups.box, groups.size
+    vis_last, class_last = last.visible, last.classes
     since = class_last.shape[0] > 0
     n_g = gbox.shape[0]
     n = pos_of.shape[0]
@@ -324,7 +359,7 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
                     for a in range(3):
                         col[a, i] = lo[p, a]
                         col[3 + a, i] = hi[p, a]
-                _across(plane_n, plane_p, gbox, g, col, m, (seen, ok))
+                _across(plane_n, plane_p, gbox, g, col, m, seen, ok)
                 for i in range(m):
                     hit = seen[i]
                     flags[rows[v0 + i] if since else v0 + i] = hit

@@ -104,7 +104,9 @@ def _centre_cells(lo, hi, visible, g_f, dims, frame):
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def record_coord(x, origin, single):
     """A coordinate as an object record holds it: x - origin, rounded to float32 in
-    "fast" precision (origin the first camera), x itself in exact precision (origin 0)."""
+    "fast" precision (origin the first camera), x itself in exact precision (origin 0).
+    x, origin: float64; single: bool, "fast" precision. DESIGN section 4 ("fast":
+    float32, relative to the first camera)."""
     d = x - origin
     return np.float64(np.float32(d)) if single else d
 
@@ -151,7 +153,9 @@ def light_order(hot, rows, g_f, dims):
     lights beyond the grid count in its border cells): consecutive lights then walk the
     same columns of objects while they are in cache. The order of lights within an
     object's list does not matter (selection breaks ties by id), so this changes nothing
-    but speed."""
+    but speed. hot: light_hot [L, 8] float64; rows: int32 light rows; g_f float64 [6],
+    dims int64 [3]: the grid's (GridIndex.frame, dims). DESIGN section 6 (the grid);
+    section 5 (results do not depend on input order)."""
     ncell = dims[0] * dims[1] * dims[2]
     key = np.empty(rows.shape[0], np.int64)
     counts = np.zeros(ncell + 2, np.int64)
@@ -186,15 +190,18 @@ def visible_order(lo: np.ndarray, hi: np.ndarray, visible: np.ndarray, g_f: np.n
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def visible_objects(lo, hi, omask, vis_rows, n_small, recs, origin):
-    """Per grid position v (parallel), written into recs = (vis_box [V, 8], its integer view
-    vis_bits): (lo - origin, hi - origin, mask (as bits), e2 = |hi - lo|^2) of object row
+    """Per grid position v (parallel), written into recs (Records: their box and bits):
+    (lo - origin, hi - origin, mask (as bits), e2 = |hi - lo|^2) of object row
     vis_rows[v], one cache line per object for the tests (float64, origin 0: exact
     precision; float32 relative to the first camera: "fast", half a line). Returns the
     largest half-extent per axis of the objects at positions below n_small (those in
     cells), which widens every light's cell range. Positions are written in order and rows
     read where they are: measured ~35% faster than the other way round at 100k objects.
-    Per-chunk maxima keep the reduction parallel."""
-    vis_box, vis_bits = recs
+    Per-chunk maxima keep the reduction parallel. lo, hi: float64 [N, 3] bounds; omask:
+    [N] mask words (the objects' masks, or shown_mask's); vis_rows: int64 [V], the object
+    row of each position; n_small: int; origin: float64 [3]. DESIGN section 2, "Affects"
+    (the box, mask and e2 the tests read); section 6 (the grid)."""
+    vis_box, vis_bits = recs.box, recs.bits
     nv = vis_rows.shape[0]
     n_chunks = (nv + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     chunk_ext = np.zeros((n_chunks, 3))
@@ -226,7 +233,7 @@ def _record_fits(o, lo, hi, grid, v, frame):
     """Whether object row o's box, its record at grid position v (below the big objects),
     lies inside the slab of that position's cell widened by the grid's ext on every
     axis (move_records)."""
-    g_f, dims, cell_start, ext, _ = grid
+    g_f, dims, cell_start, ext = grid.frame, grid.dims, grid.cell_start, grid.ext
     origin, single = frame
     key = np.searchsorted(cell_start, v, side="right") - 1
     cell = (key // (dims[1] * dims[2]), (key // dims[2]) % dims[1], key % dims[2])
@@ -251,10 +258,13 @@ def move_records(lo, hi, rows, shown_mask, grid, recs, pos_of, frame):
     having written nothing, when a box leaves its slab: the grid is then made again. An
     object moving a little each frame keeps its record for many frames: a record
     rewritten costs a few cache misses, the grid made again a pass over every object.
-    frame = (origin, single) as record_coord."""
-    vis_box, vis_bits = recs
+    grid: GridIndex; recs: its Records; frame = (origin, single) as record_coord. lo, hi:
+    float64 [N, 3] bounds; rows: int64 object rows; pos_of: int64 [N], each row's grid
+    position (-1: none, which does not fit). DESIGN section 6 (only the objects that moved
+    are recomputed)."""
+    vis_box, vis_bits = recs.box, recs.bits
     origin = frame[0]
-    n_small = grid[2][grid[1][0] * grid[1][1] * grid[1][2]]
+    n_small = grid.cell_start[grid.dims[0] * grid.dims[1] * grid.dims[2]]
     m = rows.shape[0]
     fits = np.empty(m, np.bool_)
     for r in nb.prange(m):
@@ -291,14 +301,26 @@ def _axis_cells(p, reach, origin, inv_h, dim):
 SWEEP_GROUP = 64
 
 
+class BoxSource(NamedTuple):
+    """Where a sweep over a grid of every object reads its positions' world boxes
+    (float64): position v's box is row rows[v] of lo and hi if by_row (the stores' boxes,
+    under "fast" records), else row v (columns of the grid's float64 records, which hold
+    the world boxes exactly, in grid order)."""
+
+    lo: np.ndarray      # float64 [*, 3]
+    hi: np.ndarray      # float64 [*, 3]
+    rows: np.ndarray    # int64 [V]: each grid position's object row
+    by_row: bool
+
+
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def group_boxes(at):
     """Per group of SWEEP_GROUP consecutive grid positions (parallel): the box round every
     box of the group, [G, 6] (min lo, max hi), from the boxes themselves (float64), so it
-    holds each of them exactly. at = (lo, hi, rows, by_row): position v's box is row
-    rows[v] of lo and hi if by_row, else row v (a grid's float64 records, which hold the
-    world boxes in exact precision, read in order)."""
-    lo, hi, rows, by_row = at
+    holds each of them exactly. at: BoxSource. DESIGN section 2, "Casters" and
+    "Visibility" (a box a plane rejects rejects each object in it); section 6 (kept with
+    the grid)."""
+    lo, hi, rows, by_row = at.lo, at.hi, at.rows, at.by_row
     n = rows.shape[0]
     n_g = (n + SWEEP_GROUP - 1) // SWEEP_GROUP
     out = np.empty((n_g, 6))
@@ -320,7 +342,9 @@ def group_boxes(at):
 def widen_group_boxes(boxes, lo, hi, rows, pos_of):
     """The group boxes of the objects ``rows``, which moved within a kept grid, widened
     to hold their new boxes too (the old ones stay inside: a group box only has to hold
-    its objects, and it is made tight again with the grid)."""
+    its objects, and it is made tight again with the grid). boxes: float64 [G, 6]
+    (group_boxes), in place; lo, hi: float64 [N, 3] bounds; rows: int64 object rows;
+    pos_of: int64 [N], each row's grid position. DESIGN section 6 (a kept grid's upkeep)."""
     for i in range(rows.shape[0]):
         o = rows[i]
         g = pos_of[o] // SWEEP_GROUP
@@ -371,7 +395,7 @@ class Grid:
     # a grid of every object was last checked against the lights' (_every_grid).
     edge_of: tuple[np.ndarray, bytes, int] | None = None
     # A grid of every object: the boxes round each SWEEP_GROUP of its positions' objects
-    # (shadows.group_boxes), made at the first sweep of a directional light's casters and
+    # (grid.group_boxes), made at the first sweep of a directional light's casters and
     # kept with the grid, widened in place for the objects that move within it.
     group_box: np.ndarray | None = None
     kept: bool = False
@@ -431,7 +455,7 @@ def _every_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
         g = last.grid
         kept = move_records(objects.bounds_min, objects.bounds_max, orows,
                             shown_mask(vis.objects[orows], objects.mask[orows], frame[1]),
-                            g.index, (g.records.box, g.records.bits), g.pos_of, frame)
+                            g.index, g.records, g.pos_of, frame)
         if kept and g.group_box is not None:
             widen_group_boxes(g.group_box, objects.bounds_min, objects.bounds_max, orows,
                               g.pos_of)
@@ -442,7 +466,7 @@ def _every_grid(plan: FramePlan, last: FrameState | None, objects: ObjectStore,
     # checked again once tuning.edge_drift of them changed since it last was, or any
     # radius did (radii are > 0, so bitwise equality of their bytes is equality). The edge
     # sets the cost of the walks, never their pairs.
-    radii = packed.rows[0][:, 3]
+    radii = packed.rows.hot[:, 3]
     compete = packed.compete
     edge_of = last.grid.edge_of if kept else None
     same_radii = (edge_of is not None and radii.tobytes() == edge_of[1]
@@ -534,7 +558,7 @@ def grid_cells(n_sel: int, box: np.ndarray, packed: Packed, frame: tuple[np.ndar
         # One cell holding every selected object: each light tests them all.
         g_f, dims = grid_shape(box[:3], box[3:], 2.0 * max(float(np.max(box[3:] - box[:3])), 1.0))
         return g_f, dims, f"brute force ({np.count_nonzero(compete)} lights x {n_sel} objects)"
-    radii = packed.rows[0][point_rows, 3]
+    radii = packed.rows.hot[point_rows, 3]
     median = float(np.partition(radii, radii.size // 2)[radii.size // 2])
     g_f, dims = grid_shape(box[:3], box[3:], tuning.cell_per_radius * median)
     return g_f, dims, None
@@ -547,15 +571,14 @@ def grid_text(what: str, index: GridIndex) -> str:
             f"z {RUN_SPLIT}x finer, {big_pos.size} objects larger than a cell tested directly)")
 
 
-def group_boxes_of(grid: Grid, lo: np.ndarray, hi: np.ndarray, single: bool
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    """The boxes of a grid of every object as shadows.group_boxes reads them, its group
+def group_boxes_of(grid: Grid, lo: np.ndarray, hi: np.ndarray, single: bool) -> BoxSource:
+    """The boxes of a grid of every object as grid.group_boxes reads them, its group
     boxes made from them if it has none yet. Its records hold the world boxes in exact
     precision (origin 0, float64), in grid order; "fast" ones (``single``) are rounded, so
     the stores' boxes (lo, hi) are read by row."""
     box = grid.records.box
-    boxes = ((lo, hi, grid.records.rows, True) if single else
-             (box[:, :3], box[:, 3:6], grid.records.rows, False))
+    boxes = (BoxSource(lo, hi, grid.records.rows, True) if single else
+             BoxSource(box[:, :3], box[:, 3:6], grid.records.rows, False))
     if grid.group_box is None:
         grid.group_box = group_boxes(boxes)
     return boxes
@@ -587,7 +610,7 @@ def records_grid(lo: np.ndarray, hi: np.ndarray, mask: np.ndarray, select: np.nd
     vis_box = (np.empty((nv, 8), np.float32 if frame[1] else np.float64) if out is None
                else out[:8 * nv].reshape(nv, 8))
     vis_bits = vis_box.view(np.uint32 if frame[1] else np.uint64)
-    ext = visible_objects(lo, hi, mask, vis_rows, n_small, (vis_box, vis_bits), frame[0])
+    recs = Records(vis_box, vis_bits, vis_rows)
+    ext = visible_objects(lo, hi, mask, vis_rows, n_small, recs, frame[0])
     big_pos = np.arange(n_small, nv, dtype=np.int32)
-    return (GridIndex(g_f, dims, cell_start, ext, big_pos), Records(vis_box, vis_bits, vis_rows),
-            pos_of)
+    return GridIndex(g_f, dims, cell_start, ext, big_pos), recs, pos_of

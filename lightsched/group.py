@@ -7,7 +7,7 @@ few pairs instead, and ``start_at`` gives their segments at the rows that need t
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -19,23 +19,33 @@ if TYPE_CHECKING:
     from .walk import LightPairs
 
 
+class PairHeap(NamedTuple):
+    """Pairs record by record, as the pair cache and the candidate lists' grouping hold
+    them: two arrays, so that a scan of the light rows reads a quarter of the bytes."""
+
+    p: np.ndarray          # float64 [H]: the pair's P (DESIGN section 2, "Priority")
+    light_row: np.ndarray  # int32 [H]
+
+    @staticmethod
+    def empty(n: int) -> PairHeap:
+        return PairHeap(np.empty(n), np.empty(n, np.int32))
+
+
 def group_by_object(pairs: LightPairs, n: int, buffers: Buffers, cached: bool = False
-                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """Light-major pairs grouped by object row (group_pairs): (start [N+1], (P float64
-    [H], light row int32 [H])), object o's pairs at start[o]..start[o+1]-1. ``cached``:
-    the pairs are the new pair cache, in a heap from buffers.new_heap (H may be larger
-    than the pairs)."""
+                    ) -> tuple[np.ndarray, PairHeap]:
+    """Light-major pairs grouped by object row (group_pairs): (start [N+1], their
+    PairHeap), object o's pairs at start[o]..start[o+1]-1. ``cached``: the pairs are the
+    new pair cache, in a heap from buffers.new_heap (H may be larger than the pairs)."""
     n_pairs = int(pairs.count.sum())
     start = np.empty(n + 1, np.int64)
-    heap = (buffers.new_heap(n_pairs) if cached
-            else (np.empty(n_pairs), np.empty(n_pairs, np.int32)))
+    heap = buffers.new_heap(n_pairs) if cached else PairHeap.empty(n_pairs)
     # Positions fit int32 below 2^31 pairs: half the bytes keeps each thread's histogram
     # in its core's L2.
     wide = n_pairs >= 2**31
     hist = buffers.scratch("hist64" if wide else "hist", GROUP_PARTS * (n + 1),
                            np.int64 if wide else np.int32)
     parts = group_parts(n_pairs)
-    group_pairs(*pairs, (hist[:parts * (n + 1)].reshape(parts, n + 1), start, heap))
+    group_pairs(pairs, hist[:parts * (n + 1)].reshape(parts, n + 1), start, heap)
     return start, heap
 
 
@@ -43,20 +53,23 @@ SERIAL_PAIRS = 1 << 15       # fewer pairs are grouped on one thread (group_part
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def group_pairs(rows, offsets, count, pair_obj, pair_p, out):
+def group_pairs(pairs, hist, start, heap):
     """Counting sort of the pairs by object row, so the object pass reads its lists in
-    the order it writes its outputs. The lights are split into one run per row of the
-    histogram, each counted and placed with its own row (in parallel when there are
-    several); within an object the runs follow each other, so the order of its lights is
-    the order of ``rows`` whatever the runs and threads. out = (hist [Q, N+1] int32 (int64
-    from 2^31 pairs) scratch, start [N+1], (P float64 [H], light row int32 [H])), reused
-    buffers; fills start and the pairs (P, light row): one position, two stores per
-    scattered pair.
+    the order it writes its outputs (DESIGN section 6: the pair cache). The lights are
+    split into one run per row of the histogram, each counted and placed with its own row
+    (in parallel when there are several); within an object the runs follow each other, so
+    the order of its lights is the order of pairs.rows whatever the runs and threads.
+
+    pairs: walk.LightPairs, light-major; hist [Q, N+1] int32 (int64 from 2^31 pairs):
+    scratch; start [N+1] and heap (PairHeap), reused buffers, filled: object o's pairs at
+    heap[start[o]:start[o+1]], one position, two stores per scattered pair.
 
     Q = 1 runs on the calling thread: with two runs both threads store into every
     object's segment, the lines of the small segments go back and forth between the
     cores, and below ~2^15 pairs one thread is faster (``group_parts``)."""
-    hist, start, (pair_p_out, pair_j_out) = out
+    rows, offsets, count, pair_obj, pair_p = (pairs.rows, pairs.offsets, pairs.count,
+                                              pairs.obj, pairs.p)
+    pair_p_out, pair_j_out = heap.p, heap.light_row
     n_obj = start.shape[0] - 1
     parts = hist.shape[0]
     if parts == 1:
@@ -117,11 +130,14 @@ def _place_run(q, parts, rows, offsets, count, pair_obj, pair_p, hist, pair_p_ou
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def group_few(rows, offsets, count, pair_obj, pair_p):
-    """group_pairs for a few pairs: a stable sort by object row instead of a histogram of
-    every object, whose O(N) clearing and prefix sum cost as much for no pair at all.
-    Returns (object row per pair, ascending; (P, light row)), each object's lights in the
-    order of ``rows``; ``start_at`` gives the segments."""
+def group_few(pairs):
+    """group_pairs for a few pairs (walk.LightPairs): a stable sort by object row instead
+    of a histogram of every object, whose O(N) clearing and prefix sum cost as much for no
+    pair at all. Returns (object row per pair, ascending; PairHeap), each object's lights
+    in the order of pairs.rows; ``start_at`` gives the segments. DESIGN section 6 (the
+    pair cache's layout, for an incremental frame's few pairs)."""
+    rows, offsets, count, pair_obj, pair_p = (pairs.rows, pairs.offsets, pairs.count,
+                                              pairs.obj, pairs.p)
     n_pairs = 0
     for t in range(rows.shape[0]):
         n_pairs += count[t]
@@ -136,14 +152,15 @@ def group_few(rows, offsets, count, pair_obj, pair_p):
             j[e] = rows[t]
             e += 1
     order = np.argsort(obj, kind="mergesort")
-    return obj[order], (p[order], j[order])
+    return obj[order], PairHeap(p[order], j[order])
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def start_at(rows, obj, n):
     """start [n + 1] of pairs grouped by object row (``obj``: each pair's row, ascending)
     at the object ``rows`` (ascending) and the row after each, the only entries written:
-    start[o] = the number of pairs of rows below o."""
+    start[o] = the number of pairs of rows below o. rows, obj: int64; n: the object
+    count. DESIGN section 6 (the pair cache's layout)."""
     start = np.empty(n + 1, np.int64)
     k = 0
     for r in range(rows.shape[0]):

@@ -77,7 +77,7 @@ class FadeParams(NamedTuple):
 
 
 class SlotShadows(NamedTuple):
-    """What slot_shadow reads (DESIGN section 2, "Shadows")."""
+    """What slot_shadow reads (DESIGN section 2, "slot_shadow[o, k]")."""
 
     shadow_of_row: np.ndarray  # int: per light row its shadow map index, or -1
     max_shadowed: int          # Config.max_shadowed_per_object
@@ -117,18 +117,22 @@ def _select(p, j, lid, sf, si, nbest, h, h_abs):
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static):
+def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
-    (step 3 of Fade); lists = (seg [N, 2] (start, length) of each object's pairs in the
-    heap, heap = (P float64 [H], light row int32 [H])): the pair cache; live_id = per light
+    (step 3 of Fade); seg [N, 2] (start, length) of each object's pairs in ``heap``
+    (group.PairHeap): the pair cache; live_id = per light
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; k_static = a
-    tuple of K zeros if K is in STATIC_K, else ().
+    tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows; visible, reset:
+    bool [N]; live_id: int32 [L].
+
+    DESIGN section 2, "Slots" (candidates), "Selection", "Fade" and "slot_shadow[o, k]";
+    section 3 (the per-object outputs and their empty slots); section 6 (only ``run``).
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
@@ -138,7 +142,7 @@ def object_pass(run, objs, lists, live_id, state, out, params, shadow, k_static)
     through simd.held_row, one vector store an output row; the rest run the code below.
     """
     visible, reset = objs
-    seg, (heap_p, heap_j) = lists
+    heap_p, heap_j = heap.p, heap.light_row
     s_id, s_w, s_st, s_sel = state.light_ids, state.weight, state.state, state.selected
     o_ids, o_index, o_prio, o_w = out.light_ids, out.light_index, out.priority, out.fade_weight
     o_st, o_count, o_cand, o_shadow = out.fade_state, out.count, out.candidates, out.slot_shadow
@@ -268,7 +272,7 @@ STATE = (("slot_light", np.int32, -1), ("slot_weight", np.float64, 0.0),
          ("slot_state", np.uint8, 0), ("selected", np.int32, -1))
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Outputs:
     """The objects stage's output: the per-object arrays of DESIGN section 3 (``arrays``,
     PER_OBJECT), per object whether a slot is fading in or out (``fading``, which keeps
@@ -324,7 +328,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                                          config.fade_in, config.fade_out)))
         n_l = len(lights)
         live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
-        object_pass(run, (read_only_view(visible), reset), (cache.seg, cache.heap), live_id,
+        object_pass(run, (read_only_view(visible), reset), cache.seg, cache.heap, live_id,
                     state, ObjectOutputs(*(out[name] for name in WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     (0,) * k if k in STATIC_K else ())

@@ -22,7 +22,7 @@ import numpy as np
 from .buffers import Buffers
 from .candidates import candidate_pairs, list_objects, reached_rows
 from .grid import light_order
-from .group import group_by_object, group_few, start_at
+from .group import PairHeap, group_by_object, group_few, start_at
 from .jit import OBJECT_CHUNK, PRANGE_ONLY
 from .pairs import CANDIDATES, LISTS, WALK, Pairs
 from .walk import walk_lights
@@ -72,7 +72,11 @@ def scan_pairs(seg, heap_j, light_flag, drop):
     so an incremental frame finds the objects that hold a pair of a changed light, and
     the number of its pairs whose light's flag has no ``drop`` bit: the pairs
     ``replace_lists`` keeps, counted here while the flags are read anyway (a second pass
-    over the rewritten lists was a large share of replace_lists' time)."""
+    over the rewritten lists was a large share of replace_lists' time). seg: int64 [N, 2]
+    (start, length); heap_j: int32 [H], the heap's light rows (group.PairHeap.light_row);
+    light_flag: uint8 [L] (WALKED, RESELECT bits); drop: the bit whose pairs are dropped.
+    Returns (uint8 [N], int64 [N]). DESIGN section 6 (the pair cache of an incremental
+    frame)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
     kept = np.empty(n, np.int64)
@@ -86,7 +90,9 @@ def scan_pairs(seg, heap_j, light_flag, drop):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def scan_rows(rows, seg, heap_j, light_flag, drop):
     """scan_pairs at the object ``rows`` only, on the calling thread (the few objects the
-    flagged lights reach): the flags' OR is 0 and ``kept`` undefined at every other row."""
+    flagged lights reach): the flags' OR is 0 and ``kept`` undefined at every other row.
+    rows: int64 object rows; seg, heap_j, light_flag, drop as scan_pairs'. DESIGN section 6
+    (the pair cache of an incremental frame)."""
     n = seg.shape[0]
     out = np.zeros(n, np.uint8)
     kept = np.empty(n, np.int64)
@@ -98,16 +104,17 @@ def scan_rows(rows, seg, heap_j, light_flag, drop):
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def compact_heap(seg, heap, out):
-    """The live segments of the heap (P, light row) packed from the start of ``out`` (P,
-    light row), another heap with room for them (the records after them are free); returns
-    (new seg, out, records used). Segment order is row order."""
+    """The live segments (seg [N, 2]: start, length) of ``heap`` (group.PairHeap) packed
+    from the start of ``out``, another PairHeap with room for them (the records after
+    them are free); returns (new seg, out, records used). Segment order is row order.
+    DESIGN section 6 (the pair cache's upkeep)."""
     n = seg.shape[0]
     start = np.zeros(n + 1, np.int64)
     for o in range(n):
         start[o + 1] = start[o] + seg[o, 1]
     used = start[n]
-    heap_p, heap_j = heap
-    new_p, new_j = out
+    heap_p, heap_j = heap.p, heap.light_row
+    new_p, new_j = out.p, out.light_row
     new_seg = np.empty_like(seg)
     n_chunks = (n + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     for ch in nb.prange(n_chunks):
@@ -123,16 +130,18 @@ def compact_heap(seg, heap, out):
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def replace_lists(rows, mode, cache, walked, kept, fresh, used):
+def replace_lists(rows, mode, seg, heap, walked, kept, fresh_start, fresh, used):
     """New pair lists of the object ``rows`` (ascending), appended to the heap from record
     ``used`` (the caller made room). mode per row: 0 empty (the object left the view), 1
     only its ``fresh`` pairs (its lists were rebuilt against every light: it moved or came
     into view), 2 its cached pairs of lights not flagged in ``walked`` (kept[o] of them,
     from ``scan_pairs``; all of them if kept is empty) followed by its fresh pairs (lights
-    that changed were walked again). cache = (seg, (P, light row)), updated in place;
-    fresh = (start [N+1], (P, light row)) grouped by object row."""
-    seg, (heap_p, heap_j) = cache
-    f_start, (f_p, f_j) = fresh
+    that changed were walked again). The cache, seg [N, 2] (start, length) and heap
+    (group.PairHeap), is updated in place; the fresh pairs are grouped by object row:
+    object o's at fresh[fresh_start[o]:fresh_start[o+1]] (a PairHeap). DESIGN section 6
+    (the pair cache of an incremental frame)."""
+    heap_p, heap_j = heap.p, heap.light_row
+    f_start, f_p, f_j = fresh_start, fresh.p, fresh.light_row
     at = np.empty(rows.shape[0] + 1, np.int64)
     at[0] = used
     for r in range(rows.shape[0]):
@@ -171,15 +180,15 @@ WALKED, RESELECT = 1, 2
 _NO_ROWS = np.zeros(0, np.int64)
 
 
-@dataclass
+@dataclass(slots=True)
 class PairCache:
     """The lists stage's output, kept for the next frame: per object row ``seg`` (start,
-    length) of its pairs in ``heap`` (P float64, light row int32), ``used`` the heap records
+    length) of its pairs in ``heap`` (group.PairHeap), ``used`` the heap records
     in use (live or garbage), ``pairs`` the live ones (the lengths in seg summed). Also
     this frame's ``run``: the object rows the object pass recomputes, and ``how``."""
 
     seg: np.ndarray
-    heap: tuple[np.ndarray, np.ndarray]
+    heap: PairHeap
     used: int
     pairs: int
     run: np.ndarray
@@ -208,7 +217,7 @@ def update_pair_cache(plan: FramePlan, last: FrameState | None, pairs: Pairs,
     else:
         cache = _patch(plan, last, pairs, shadows, vis, packed, grid, light_rows, tuning,
                        buffers)
-    if last is not None and last.cache.heap[0] is not cache.heap[0]:
+    if last is not None and last.cache.heap.p is not cache.heap.p:
         buffers.spare_heap = last.cache.heap
     return cache
 
@@ -220,17 +229,16 @@ def _from_candidates(pairs: Pairs, packed: Packed, n: int, buffers: Buffers) -> 
     candidate_pairs writes nothing and reports the exact room, which the heap then takes."""
     cands = pairs.candidates
     dir_rows = packed.dir_all[packed.compete[packed.dir_all]]
-    c_seg, _, c_j, _ = cands.lists
     seg = np.empty((n, 2), np.int64)
     # (The lights' list lengths, not the objects': the same candidates, fewer to sum.)
-    heap = buffers.new_heap(int(cands.by_light[0][:, 1].sum()) + n * dir_rows.size)
-    args = (buffers.rows(n), (c_seg, c_j), cands.records, packed.rows, packed.compete,
+    heap = buffers.new_heap(int(cands.by_light.seg[:, 1].sum()) + n * dir_rows.size)
+    args = (buffers.rows(n), cands.lists, cands.records, packed.rows, packed.compete,
             dir_rows, pairs.params)
-    used, n_pairs, _ = candidate_pairs(*args, (seg, *heap), 0)
+    used, n_pairs, _ = candidate_pairs(*args, seg, heap, 0)
     if n_pairs < 0:
         buffers.spare_heap = heap
         heap = buffers.new_heap(int(used))
-        used, n_pairs, _ = candidate_pairs(*args, (seg, *heap), 0)
+        used, n_pairs, _ = candidate_pairs(*args, seg, heap, 0)
     return PairCache(seg, heap, int(used), int(n_pairs), buffers.rows(n, read_only=False),
                      "every pair from the objects' candidate lists, by object row")
 
@@ -251,16 +259,15 @@ def _from_lists(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: Shadow
     more = (fading | vis.objects | last.visibility.objects) if plan.cut else fading
     rows, run = reached_rows(reach.view(np.uint8), vis.objects.view(np.uint8),
                              more.view(np.uint8))
-    c_seg, _, c_j, _ = cands.lists
     c = last.cache
     seg, heap, used, n_pairs = c.seg, c.heap, c.used, c.pairs
     if rows.size:
-        args = (rows, (c_seg, c_j), cands.records, packed.rows, packed.compete, _NO_ROWS,
+        args = (rows, cands.lists, cands.records, packed.rows, packed.compete, _NO_ROWS,
                 pairs.params)
-        at, wrote, dropped = candidate_pairs(*args, (seg, *heap), used)
+        at, wrote, dropped = candidate_pairs(*args, seg, heap, used)
         if wrote < 0:
             seg, heap, used = _room(buffers, seg, heap, used, n_pairs, int(at) - used)
-            at, wrote, dropped = candidate_pairs(*args, (seg, *heap), used)
+            at, wrote, dropped = candidate_pairs(*args, seg, heap, used)
         need = int(at) - used
         used, n_pairs = int(at), n_pairs - int(dropped) + int(wrote)
         # Packed now, not at the start of the next frame like this one (which would not
@@ -292,11 +299,11 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
     near = (_near_rows(plan, c, flagged, light_rows, packed, grid, pairs.params, tuning,
                        buffers) if flagged.size else None)
     if near is not None:
-        holds, kept = scan_rows(near, c.seg, c.heap[1], flag, WALKED)
+        holds, kept = scan_rows(near, c.seg, c.heap.light_row, flag, WALKED)
         scanned = (f"the pairs of the {near.size} objects the {flagged.size} flagged lights "
                    "reach scanned")
     elif flagged.size:
-        holds, kept = scan_pairs(c.seg, c.heap[1], flag, WALKED)
+        holds, kept = scan_pairs(c.seg, c.heap.light_row, flag, WALKED)
         scanned = f"every object's pairs scanned for {flagged.size} flagged lights"
     else:
         holds, kept = np.zeros(n, np.uint8), np.zeros(0, np.int64)
@@ -305,7 +312,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
     few = int(fresh.count.sum()) <= tuning.few_pairs * n
     rows1 = np.union1d(vis.fresh, vis.left)
     if few:
-        w_obj, w_pairs = group_few(*fresh)
+        w_obj, w_pairs = group_few(fresh)
     else:
         w_start, w_pairs = group_by_object(fresh, n, buffers)
     fading = last.outputs.fading
@@ -338,14 +345,14 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
     o_start, o_pairs = pairs.objects
     # The cache is this frame's to change.
     seg, heap, used = _room(buffers, c.seg, c.heap, c.used, c.pairs,
-                            w_pairs[0].size + int(c.seg[rows2, 1].sum()) + o_pairs[0].size)
+                            w_pairs.p.size + int(c.seg[rows2, 1].sum()) + o_pairs.p.size)
     walked = (flag & WALKED) != 0
     # The cache's pairs follow from the rewritten lists' lengths.
     rewritten = (rows1, rows2)
     n_pairs = c.pairs - sum(int(seg[rows, 1].sum()) for rows in rewritten)
-    used = int(replace_lists(rows2, np.full(rows2.size, 2, np.int8), (seg, heap), walked, kept,
-                             (w_start, w_pairs), used))
-    used = int(replace_lists(rows1, mode1, (seg, heap), walked, kept, (o_start, o_pairs), used))
+    used = int(replace_lists(rows2, np.full(rows2.size, 2, np.int8), seg, heap, walked, kept,
+                             w_start, w_pairs, used))
+    used = int(replace_lists(rows1, mode1, seg, heap, walked, kept, o_start, o_pairs, used))
     n_pairs += sum(int(seg[rows, 1].sum()) for rows in rewritten)
     return PairCache(seg, heap, used, n_pairs, run,
                      f"cache kept; {scanned}; {run.size} of {np.count_nonzero(vis.objects)} "
@@ -366,20 +373,21 @@ def _near_rows(plan: FramePlan, c: PairCache, flagged: np.ndarray, light_rows: n
     if (plan.fast or flagged.size * tuning.near_scan_pairs > c.pairs
             or packed.is_dir[flagged].any() or np.isin(flagged, light_rows).any()):
         return None
-    order = light_order(packed.rows[0], flagged.astype(np.int32), grid.index.frame, grid.index.dims)
+    order = light_order(packed.rows.hot, flagged.astype(np.int32), grid.index.frame,
+                        grid.index.dims)
     walked = walk_lights(packed.rows, order, grid, params, buffers, "near")
     return np.unique(np.concatenate(
         [walked.obj[walked.offsets[t]:walked.offsets[t] + walked.count[t]]
          for t in range(order.size)] + [_NO_ROWS]))
 
 
-def _room(buffers: Buffers, seg: np.ndarray, heap: tuple[np.ndarray, np.ndarray], used: int,
-          n_live: int, need: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int]:
+def _room(buffers: Buffers, seg: np.ndarray, heap: PairHeap, used: int, n_live: int,
+          need: int) -> tuple[np.ndarray, PairHeap, int]:
     """A pair cache (seg, heap, records used; ``n_live`` of them live) with room for
     ``need`` more records. New lists go after the records in use (those are not written),
     the heap packed first when short of room or mostly garbage, into a heap from
     buffers.new_heap. The room left after packing holds ~4 more frames like this one."""
-    if used + need > heap[0].size or used > 2 * (n_live + need) + 4096:
+    if used + need > heap.p.size or used > 2 * (n_live + need) + 4096:
         seg, heap, used = compact_heap(seg, heap,
                                        buffers.new_heap(n_live + 4 * need + n_live // 2 + 1024))
     return seg, heap, used

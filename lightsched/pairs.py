@@ -26,8 +26,9 @@ import numpy as np
 
 from .buffers import Buffers
 from .candidates import Candidates, list_objects, update_candidates
-from .fresh_pairs import fresh_object_pairs, light_grid
+from .fresh_pairs import LightGrid, fresh_object_pairs, light_grid
 from .grid import Grid, light_order
+from .group import PairHeap
 from .priority import Packed, PairParams
 from .scene import Config, LightStore, ObjectStore
 from .tuning import Tuning
@@ -42,7 +43,7 @@ CANDIDATES, LISTS, WALK, PATCH = "candidates", "lists", "walk", "patch"
 _NO_LIGHTS = np.zeros(0, np.int64)
 
 
-@dataclass
+@dataclass(slots=True)
 class Pairs:
     """The pairs stage's output. ``path``: one of the four above. ``walked``: the light
     rows whose cached pairs are replaced (lists, patch); ``lights``: their new pairs, light
@@ -50,17 +51,17 @@ class Pairs:
     view, grouped by object row (patch); ``reach``: per object row, whether a changed
     light's list holds it (lists); ``candidates``: the candidate lists, kept for the next
     frame (None when there are none); ``light_grid``: the grid of the point and spot lights
-    fresh_pairs made, kept while no light changes; ``params`` = (model, w_obj, w_int) of
-    the pairs' P; ``how``: the plan's entry."""
+    fresh_pairs made, kept while no light changes; ``params``: the pairs' P's; ``how``:
+    the plan's entry."""
 
     path: str
     params: PairParams
     walked: np.ndarray = field(default_factory=lambda: _NO_LIGHTS)
     lights: LightPairs | None = None
-    objects: tuple | None = None
+    objects: tuple[np.ndarray, PairHeap] | None = None
     reach: np.ndarray | None = None
     candidates: Candidates | None = None
-    light_grid: tuple | None = None
+    light_grid: LightGrid | None = None
     how: str = ""
 
 
@@ -104,7 +105,7 @@ def find_pairs(plan: FramePlan, last: FrameState | None, lights: LightStore,
                      + f"; the objects in the lists of the {changed.size} changed lights take "
                        "their pairs from their candidate lists")
     if plan.full:
-        rows = light_order(packed.rows[0], np.flatnonzero(packed.compete).astype(np.int32),
+        rows = light_order(packed.rows.hot, np.flatnonzero(packed.compete).astype(np.int32),
                            grid.index.frame, grid.index.dims)
         return Pairs(WALK, params, lights=walk_lights(packed.rows, rows, grid, params, buffers,
                                                       "pair"),
@@ -143,14 +144,14 @@ def _patch_pairs(last: FrameState, changed: np.ndarray, light_rows: np.ndarray,
     every light when there are few, else against the lights of the cells its box overlaps
     in a grid of the lights (kept while no light changes)."""
     walk = changed[packed.compete[changed]].astype(np.int32)
-    walk = light_order(packed.rows[0], walk, grid.index.frame, grid.index.dims)
+    walk = light_order(packed.rows.hot, walk, grid.index.frame, grid.index.dims)
     walked = walk_lights(packed.rows, walk, grid, params, buffers, "pair")
     fresh = vis.fresh
     n_point = int(np.count_nonzero(packed.compete & ~packed.is_dir)) if fresh.size else 0
     cells = last.pairs.light_grid if light_rows.size == 0 else None
     how = "tested against"
     if not fresh.size:
-        found = (np.zeros(len(objects) + 1, np.int64), (np.zeros(0), np.zeros(0, np.int32)))
+        found = (np.zeros(len(objects) + 1, np.int64), PairHeap.empty(0))
     elif fresh.size * n_point <= (
             tuning.direct_tests_per_light * n_point + len(objects) if cells is None
             else tuning.grid_tests_per_object * fresh.size):
@@ -159,7 +160,7 @@ def _patch_pairs(last: FrameState, changed: np.ndarray, light_rows: np.ndarray,
         how = "from the cells of a grid of"
         if cells is None:
             how = "from the cells of a new grid of"
-            cells = light_grid(packed.rows[0], np.flatnonzero(~packed.is_dir).astype(np.int32))
+            cells = light_grid(packed.rows.hot, np.flatnonzero(~packed.is_dir).astype(np.int32))
         found = fresh_object_pairs(fresh, objects, packed, params, frame, cells)
     return Pairs(PATCH, params, walked=changed, lights=walked, objects=found, light_grid=cells,
                  how=(f", walked by {walk.size} changed lights (the other pairs are kept); "

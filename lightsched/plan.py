@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 FULL, INCREMENTAL, UNCHANGED = "full", "incremental", "unchanged"
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class FramePlan:
     """What a frame runs. ``kind``: FULL (every pair found again, though inputs that did
     not change may still be kept), INCREMENTAL (last frame's pair cache patched) or

@@ -206,7 +206,7 @@ def pack_lights(lights: LightStore, frames: CameraFrames, w_ecc: float, w_dist: 
                                 np.int64(parts)))
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Packed:
     """The pack stage's output: the lights as packed rows (``rows`` = (light_hot,
     light_f), above) relative to ``origin`` (the object records' frame); which lights
@@ -244,7 +244,7 @@ def pack(plan: FramePlan, last: Packed | None, lights: LightStore, frames: Camer
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def berka_eccentricity(v0, v1, v2, d_viewer, r, basis, tan_xy, focus, c1):
-    """Berka's eccentricity f (DESIGN section 2, "thesis"; shadow importance uses it too)
+    """Berka's eccentricity f (DESIGN section 2, "Priority", the thesis model; shadow importance uses it too)
     of a light at v = p - camera position, d_viewer = |v|: 1 if d_viewer <= r, else
     1 if theta <= alpha, else exp(-(theta - alpha)/c1), alpha = asin(min(1, r/d_viewer)),
     theta = atan2(|g x v|, g . v), g the focal ray f + (x t_x) r + (y t_y) u."""
@@ -269,6 +269,10 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
 
     The rest of eq. 3.1 does not depend on the camera and rounding is monotone, so the
     max over cameras of the whole sum equals the sum built on the max of this term.
+
+    p: the light's position f64[3]; r: its radius; cam_p: the camera's position f64[3];
+    basis [3, 3] (rows f, r, u), tan_xy (t_x, t_y), focus (x, y): CameraFrames' row;
+    w_ecc, w_dist, c1: Config's. DESIGN section 2, "Priority" (the "thesis" model).
     """
     v0 = p[0] - cam_p[0]
     v1 = p[1] - cam_p[1]
@@ -281,7 +285,9 @@ def thesis_camera_term(p, r, cam_p, basis, tan_xy, focus, w_ecc, w_dist, c1):
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def box_d2(boxes, i, p0, p1, p2):
     """Squared distance from p to box i of boxes [n, 6] (lo, hi): delta_k = max(lo_k - p_k,
-    0, p_k - hi_k), d2 = dx*dx + dy*dy + dz*dz."""
+    0, p_k - hi_k), d2 = dx*dx + dy*dy + dz*dz. Records [n, 8] too (columns 0-5 read);
+    i: the row; p0, p1, p2: the light's position in the boxes' frame. DESIGN section 2,
+    "Affects"."""
     dx = max(boxes[i, 0] - p0, 0.0, p0 - boxes[i, 3])
     dy = max(boxes[i, 1] - p1, 0.0, p1 - boxes[i, 4])
     dz = max(boxes[i, 2] - p2, 0.0, p2 - boxes[i, 5])
@@ -294,7 +300,9 @@ def falloff(i, r, d2, e2):
     g = min(1, 4 r*r / e2) (1 for e2 = 0). P = falloff * s + p_user.
 
     g skips its division when 4 r*r >= e2: a correctly rounded a/b with a >= b > 0 is >= 1,
-    so min(1, a/b) is exactly 1 (most objects are small beside the light's range)."""
+    so min(1, a/b) is exactly 1 (most objects are small beside the light's range).
+    i: intensity; r: radius; d2: box_d2's; e2 = |hi - lo|^2; all float64. DESIGN
+    section 2, "Priority" (the "contribution" model)."""
     q = d2 / (r * r)
     w = max(0.0, 1.0 - q * q)
     a = 4.0 * r * r
@@ -306,7 +314,10 @@ def falloff(i, r, d2, e2):
 def spot_cone(hot, lf, j, geo, contribution):
     """(meets, s) of spot row j and the object's bounding sphere geo = (c0, c1, c2, R, e2):
     the one-nappe cone test, and the spot factor s of the contribution model (1 when not
-    needed). c is the cosine of the smallest angle from the axis to the sphere."""
+    needed). c is the cosine of the smallest angle from the axis to the sphere. hot, lf:
+    priority.PackedLights' [L, 8] rows; j: the light's row; geo as record_geometry gives
+    it; contribution: bool, whether s is needed. DESIGN section 2, "Affects" (the cone
+    test) and "Priority" (the spot factor s)."""
     v0 = geo[0] - hot[j, 0]
     v1 = geo[1] - hot[j, 1]
     v2 = geo[2] - hot[j, 2]
@@ -332,7 +343,9 @@ def spot_cone(hot, lf, j, geo, contribution):
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def thesis(hot, lf, j, geo, w_obj, w_int):
     """Eriksson eq. 3.1 with the camera term A = max over cameras (light_f column 7):
-    P = A + w_obj d_object + w_int i + p_user, d_object = |p - c|."""
+    P = A + w_obj d_object + w_int i + p_user, d_object = |p - c|. hot, lf, j, geo as
+    spot_cone's; w_obj, w_int: PairParams'. DESIGN section 2, "Priority" (the "thesis"
+    model)."""
     u0 = hot[j, 0] - geo[0]
     u1 = hot[j, 1] - geo[1]
     u2 = hot[j, 2] - geo[2]
@@ -351,7 +364,11 @@ __all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "box_d2", "falloff", "pack_ligh
 def record_pair_p(hot, lf, j, typ, v, d2, vis_box, model, w_obj, w_int):
     """(affects, P) of light j and visible object v once d2 <= r*r holds: the spot cone and
     the model's P (priority.py holds the rules). The bounding sphere (centre (lo + hi)/2,
-    R = |hi - lo|/2) is only built when a rule needs it."""
+    R = |hi - lo|/2) is only built when a rule needs it. hot, lf: priority.PackedLights'
+    rows; j: the (point or spot) light's row; typ: its type (from light_hot column 5); v: the
+    record's row in vis_box (grid.Records.box [V, 8], float64 or float32); d2: box_d2's;
+    model: MODEL_*; w_obj, w_int: PairParams'. DESIGN section 2, "Affects" and
+    "Priority"."""
     e2 = record_e2(vis_box, v)
     if typ == SPOT or model != MODEL_CONTRIBUTION:
         geo = record_geometry(vis_box, v)
@@ -381,7 +398,9 @@ def record_geometry(box, v):
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def record_e2(box, v):
-    """e2 = |hi - lo|^2 of record v (see _geometry)."""
+    """e2 = |hi - lo|^2 of record v of box (records [V, 8]: a float64 one holds it in
+    column 7, a float32 one has it computed; see record_geometry). DESIGN section 2,
+    "Priority" (e2)."""
     if box.itemsize == 8:
         return np.float64(box[v, 7])
     ex = np.float64(box[v, 3]) - np.float64(box[v, 0])

@@ -49,10 +49,13 @@ from .tuning import Tuning
 from .visibility import Visibility, see
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class FrameState:
     """Last frame's stage outputs. Store arrays are never changed in place, so the arrays
-    ``changes`` holds (those the frame read) are enough to see later which rows changed."""
+    ``changes`` holds (those the frame read) are enough to see later which rows changed.
+    A stage's output is not changed after its stage returns it (the next frame reads it
+    as it was); the stage output classes are plain slotted dataclasses rather than frozen
+    ones, whose field-by-field ``object.__setattr__`` costs microseconds a frame."""
 
     changes: Changes
     cameras: Cameras

@@ -14,7 +14,8 @@ import numba as nb
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ranks_before(key_a, id_a, key_b, id_b):
-    """True if (key_a, id_a) ranks before (key_b, id_b): higher key, ties lower id."""
+    """True if (key_a, id_a) ranks before (key_b, id_b): higher key, ties lower id.
+    DESIGN section 2, "Selection" (and "Fade"'s output order)."""
     return key_a > key_b or (key_a == key_b and id_a < id_b)
 
 
@@ -31,7 +32,9 @@ I_ROWS = 11
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def hysteresis_key(p, lid, si, h, h_abs):
     """P, raised by h|P| + h_abs if lid was selected last frame (row I_PREV_SEL, padded
-    with -1). Compares only in the loop, no early exit: it vectorises."""
+    with -1). Compares only in the loop, no early exit: it vectorises. p: P; lid: the
+    light's id; si: int64 [I_ROWS, K] scratch; h, h_abs: Config.hysteresis,
+    hysteresis_abs. DESIGN section 2, "Selection" (hysteresis)."""
     was = False
     for m in range(si.shape[1]):
         was |= si[I_PREV_SEL, m] == lid
@@ -41,7 +44,9 @@ def hysteresis_key(p, lid, si, h, h_abs):
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def topk_insert(sf, si, nbest, key, lid, p, row):
     """Inserts one candidate into the sorted top-K rows (F_KEY, F_P, I_ID, I_ROW); returns
-    the new size."""
+    the new size. sf: float64 [F_ROWS, K], si: int64 [I_ROWS, K]: the object's scratch;
+    nbest: the rows filled; key: hysteresis_key's; lid: light id; p: P; row: light row.
+    DESIGN section 2, "Selection"."""
     k = sf.shape[1]
     # Where it goes: a count of compares (no stores, so it vectorises), then the shift.
     pos = 0

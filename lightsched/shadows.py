@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from .grid import Grid
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ShadowSet:
     """The shadows stage's output: the shadow lights' ``rows`` in rank order, their ids
     and ``tier``s; ``candidates``: how many lights competed; ``shadow_of_row``: per light
@@ -202,7 +202,10 @@ def pick_slot_shadows(sf, si, cnt, shadow_of_row, max_per_object, out, o):
     in shadow_lights; -1 elsewhere. Fading-out slots count: the shader still samples them.
     Reads the object's new slots (F_NEW_W, I_NEW_ROW of select.py, in output order) and
     writes row o of out [N, K], which the caller has filled with -1; inlined into
-    objects.object_pass."""
+    objects.object_pass. sf, si: the object's scratch (select.py); cnt: its occupied
+    slots; shadow_of_row: int8 [L] (ShadowSet's); max_per_object:
+    Config.max_shadowed_per_object; out: int8 slot_shadow. DESIGN section 2,
+    "slot_shadow[o, k]"."""
     for _ in range(max_per_object):
         best = -1
         for m in range(cnt):

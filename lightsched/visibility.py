@@ -14,7 +14,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .frustum import Cameras, lights_visible, objects_visible, objects_visible_groups
+from .frustum import (
+    Cameras,
+    GroupBoxes,
+    GroupPass,
+    lights_visible,
+    objects_visible,
+    objects_visible_groups,
+)
 from .grid import SWEEP_GROUP, group_boxes_of
 from .scene import LightStore, ObjectStore
 
@@ -27,7 +34,7 @@ NO_ROWS = np.zeros(0, np.int64)
 _NO_CLASS = np.zeros(0, np.int8)
 
 
-@dataclass
+@dataclass(slots=True)
 class Visibility:
     """``lights`` and ``objects``: the visibility flags; ``box``: a box holding the visible
     objects (it only sets a grid's extent, so it may be larger); ``flipped``: the rows
@@ -101,8 +108,8 @@ def _by_groups(last: FrameState, lo: np.ndarray, hi: np.ndarray,
     before = last.visibility.groups
     since = before is not None and before[0] is grid.pos_of
     vis_o, box, classes = objects_visible_groups(
-        boxes, *planes, (grid.pos_of, grid.group_box, SWEEP_GROUP),
-        (last.visibility.objects, before[1] if since else _NO_CLASS))
+        boxes, *planes, GroupBoxes(grid.pos_of, grid.group_box, SWEEP_GROUP),
+        GroupPass(last.visibility.objects, before[1] if since else _NO_CLASS))
     how = (f"; by the boxes of {SWEEP_GROUP} positions of last frame's grid of every object "
            "first")
     if since:

@@ -167,7 +167,9 @@ def light_bounds(hot, rows, grid, n_vis):
     of an upper bound of the pairs it can emit (objects centred in the cells of its
     widened cube plus the big objects; every visible object for a directional light).
     hot: PackedLights.hot; grid: GridIndex; n_vis: the grid's object count. Parallel from
-    SERIAL_LIGHTS lights."""
+    SERIAL_LIGHTS lights. rows: int32 light rows, in grid order. DESIGN section 2,
+    "Affects" (the pairs it bounds); section 5 (a segment per light: the pairs do not
+    depend on the thread count)."""
     g_f, dims, cell_start, ext, big_pos = grid
     n_big = big_pos.shape[0]
     out = np.zeros(rows.shape[0], np.int64)

@@ -21,6 +21,7 @@ from hypothesis import HealthCheck, settings
 import lightsched as ls
 import lightsched.reference as ref
 from lightsched.frame import FRAME_ARRAYS
+from lightsched.grid import BoxSource
 from lightsched.scene import DIRECTIONAL, FADING_OUT
 from lightsched.tuning import Tuning
 
@@ -390,13 +391,13 @@ def frames_identical(a: ls.Frame, b: ls.Frame, what: str = "") -> None:
 
 
 def by_row_or_grid(lo: np.ndarray, hi: np.ndarray, grid_rows: np.ndarray, by_row: bool
-                   ) -> tuple:
+                   ) -> BoxSource:
     """The boxes of a grid's positions as grid.group_boxes, casters.sweep_groups and
     frustum.objects_visible_groups read them: the objects' by row, or (as a grid's float64
     records hold them) copied into grid order, as views of one [V, 8] array."""
     if by_row:
-        return lo, hi, grid_rows, True
+        return BoxSource(lo, hi, grid_rows, True)
     recs = np.zeros((grid_rows.size, 8))
     recs[:, :3] = lo[grid_rows]
     recs[:, 3:6] = hi[grid_rows]
-    return recs[:, :3], recs[:, 3:6], grid_rows, False
+    return BoxSource(recs[:, :3], recs[:, 3:6], grid_rows, False)

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 import lightsched as ls
 import lightsched.reference as ref
-from lightsched.casters import MAX_PLANES, SWEEP_BLOCK, sweep_casters, sweep_groups
+from lightsched.casters import MAX_PLANES, SWEEP_BLOCK, Volumes, sweep_casters, sweep_groups
 from lightsched.grid import group_boxes, widen_group_boxes
 from lightsched.tuning import Tuning
 
@@ -421,7 +421,7 @@ def test_sweep_casters_equals_the_plane_test_box_by_box(seed):
     casts = rng.random(n) < 0.9
     omask = rng.choice(np.array([1, 2, 3], np.uint32), n)
     lmask = np.array([1, 2], np.int64)
-    vols = (vn, vq, vm, shared)
+    vols = Volumes(vn, vq, vm, shared)
     got = sweep_casters(lo, hi, casts, omask, lmask, vols)
     want = sweep_bits_by_numpy(lo, hi, casts, omask, lmask, vols)
     assert np.count_nonzero(want) > 100
@@ -441,7 +441,7 @@ def test_sweep_groups_equals_the_plane_test_box_by_box(seed, order, reach):
     grid order (exact). Then a quarter of the objects move, their group boxes widened in
     place (widen_group_boxes), and the sweep is the same again."""
     rng = np.random.default_rng(seed)
-    vols = random_volumes(rng, reach)
+    vols = Volumes(*random_volumes(rng, reach))
     n = 20_000
     centre = rng.uniform(-4.0, 4.0, (n, 3))
     half = rng.uniform(0.0, 0.3, (n, 3))

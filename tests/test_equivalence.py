@@ -223,7 +223,7 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
     From the second pass on it is given the last pass's flags and classes too, and gives
     the same as without them. Its box holds the visible objects' and lies within the
     group boxes."""
-    from lightsched.frustum import IN, OUT, objects_visible_groups
+    from lightsched.frustum import IN, OUT, GroupBoxes, GroupPass, objects_visible_groups
     from lightsched.grid import group_boxes, widen_group_boxes
 
     rng, lo, hi, f, want = _visibility_scene(cams, seed, n)
@@ -239,7 +239,7 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
         gbox = np.array([np.concatenate([lo[grid_rows[v:v + size]].min(0),
                                          hi[grid_rows[v:v + size]].max(0)])
                          for v in range(0, n, size)])
-    last = (np.zeros(0, bool), np.zeros(0, np.int8))
+    last = GroupPass(np.zeros(0, bool), np.zeros(0, np.int8))
     for step, step_cams in enumerate([cams, cams2, cams]):
         if step == 1:
             # Some objects move within their group's box, which takes in their new box.
@@ -258,11 +258,12 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
             f, want = _oracle_visibility(step_cams, lo, hi)
         at = by_row_or_grid(lo, hi, grid_rows, by_row)
         vis, box, classes = objects_visible_groups(at, f.plane_n, f.plane_p,
-                                                   (pos_of, gbox, size), last)
+                                                   GroupBoxes(pos_of, gbox, size), last)
         assert np.array_equal(vis, want), step
         if step:
-            fresh = objects_visible_groups(at, f.plane_n, f.plane_p, (pos_of, gbox, size),
-                                           (np.zeros(0, bool), np.zeros(0, np.int8)))
+            fresh = objects_visible_groups(at, f.plane_n, f.plane_p,
+                                           GroupBoxes(pos_of, gbox, size),
+                                           GroupPass(np.zeros(0, bool), np.zeros(0, np.int8)))
             for x, y in zip((vis, box, classes), fresh, strict=True):
                 assert np.array_equal(x, y), step
         for g in range(gbox.shape[0]):
@@ -274,7 +275,7 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
             assert (box[:3] >= gbox[:, :3].min(0)).all() and (box[3:] <= gbox[:, 3:].max(0)).all()
         else:
             assert np.array_equal(box, [np.inf] * 3 + [-np.inf] * 3)
-        last = (vis, classes)
+        last = GroupPass(vis, classes)
 
 
 @examples(1.0)
@@ -474,8 +475,9 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype, parts):
     """The pair cache is the light-major pairs sorted by object row, each object's lights in
     the walk's order, with either histogram width (int64 serves from 2^31 pairs) and on
     one thread (one run of lights) or in parallel runs."""
-    from lightsched.group import SERIAL_PAIRS, group_pairs, group_parts
+    from lightsched.group import SERIAL_PAIRS, PairHeap, group_pairs, group_parts
     from lightsched.jit import GROUP_PARTS
+    from lightsched.walk import LightPairs
 
     assert group_parts(SERIAL_PAIRS - 1) == 1 and group_parts(SERIAL_PAIRS) == GROUP_PARTS
 
@@ -487,16 +489,16 @@ def test_group_pairs_is_a_stable_sort_by_object(hist_dtype, parts):
     pair_obj = rng.integers(0, n_obj, offsets[-1]).astype(np.int32)
     pair_p = rng.random(offsets[-1])
     start = np.empty(n_obj + 1, np.int64)
-    heap = (np.empty(count.sum()), np.empty(count.sum(), np.int32))
-    group_pairs(rows, offsets, count, pair_obj, pair_p,
-                (np.full((parts, n_obj + 1), 7, hist_dtype), start, heap))
+    heap = PairHeap.empty(count.sum())
+    group_pairs(LightPairs(rows, offsets, count, pair_obj, pair_p),
+                np.full((parts, n_obj + 1), 7, hist_dtype), start, heap)
     seg = [np.arange(offsets[t], offsets[t] + count[t]) for t in range(n_l)]
     e = np.concatenate(seg)
     light = np.repeat(rows, count)
     order = np.argsort(pair_obj[e], kind="stable")
     assert np.array_equal(start, np.searchsorted(pair_obj[e][order], np.arange(n_obj + 1)))
-    assert np.array_equal(heap[0], pair_p[e][order])
-    assert np.array_equal(heap[1], light[order])
+    assert np.array_equal(heap.p, pair_p[e][order])
+    assert np.array_equal(heap.light_row, light[order])
 
 
 def test_per_light_kernels_give_the_same_bits_on_one_thread_and_two(tuning):

@@ -20,9 +20,9 @@ from test_equivalence import big_scene, configs
 import lightsched as ls
 import lightsched.objects
 from lightsched.buffers import Buffers
-from lightsched.candidates import compact_light_lists, reached_rows, widen_walkers
+from lightsched.candidates import LightLists, compact_light_lists, reached_rows, widen_walkers
 from lightsched.frame import rows_not_in
-from lightsched.grid import shown_mask, visible_objects
+from lightsched.grid import Records, shown_mask, visible_objects
 from lightsched.scenes import city, move_lights
 from lightsched.simd import SHOWN
 from lightsched.tuning import Tuning
@@ -423,7 +423,7 @@ def test_compacted_light_lists_hold_each_lights_list_in_order():
     starts = rng.permutation(n_l) * 50 + rng.integers(0, 10, n_l)
     l_obj = rng.integers(0, 10_000, 50 * n_l + 64).astype(np.int32)
     l_seg = np.stack([starts, lengths], 1).astype(np.int64)
-    seg, obj, used = compact_light_lists((l_seg, l_obj), 123)
+    seg, obj, used = compact_light_lists(LightLists(l_seg, l_obj), 123)
     assert used == lengths.sum() and obj.size == used + 123 and obj.dtype == np.int32
     assert np.array_equal(seg[:, 1], lengths)
     assert np.array_equal(seg[:, 0], np.concatenate([[0], np.cumsum(lengths)[:-1]]))
@@ -444,8 +444,8 @@ def test_walkers_are_widened_and_led_along_their_last_step():
     now = hot[:, :3].copy()
     last = now - [[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     wide = np.full((3, 8), -7.0)
-    sel = widen_walkers(hot, np.array([True, True, False]), (now, last), wide,
-                        (skin, lead, float(0xFFFFFFFF)))
+    sel = widen_walkers(hot, np.array([True, True, False]), now, last, wide, skin, lead,
+                        float(0xFFFFFFFF))
     assert sel.dtype == np.int32 and sel.tolist() == [0, 1]
     ahead = lead * skin * 10.0 / 5.0
     assert np.allclose(wide[0, :3], [1.0 + 3.0 * ahead, 2.0 + 4.0 * ahead, 3.0], rtol=0,
@@ -904,7 +904,7 @@ def test_an_out_of_view_objects_mask_word_meets_only_the_walk_for_a_moving_camer
     bits = recs.view(np.uint32 if single else np.uint64)
     lo = rng.uniform(-5, 5, (n, 3))
     visible_objects(lo, lo + 1.0, shown_mask(shown, mask, single), np.arange(n), n,
-                    (recs, bits), np.zeros(3))
+                    Records(recs, bits, np.arange(n)), np.zeros(3))
     word = bits[:, 6].astype(np.uint64)
     assert np.array_equal(word & np.uint64(SHOWN), np.where(shown, mask, 0))
     for light in [*edge.tolist(), *rng.integers(0, 2**32, 20).tolist()]:

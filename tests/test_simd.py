@@ -21,9 +21,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import lightsched.simd as simd
-from lightsched.candidates import candidate_pairs
+from lightsched.candidates import RowRecords, candidate_pairs
 from lightsched.candidates import scalar_candidates as pairs_scalar
-from lightsched.grid import visible_objects
+from lightsched.fresh_pairs import FoundLists
+from lightsched.grid import Records, visible_objects
+from lightsched.group import PairHeap
 from lightsched.jit import OBJECT_CHUNK, PRANGE_ONLY
 from lightsched.objects import (
     FadeParams,
@@ -33,7 +35,7 @@ from lightsched.objects import (
     live_ids,
     object_pass,
 )
-from lightsched.priority import MODEL_CONTRIBUTION, PairParams, box_d2, falloff
+from lightsched.priority import MODEL_CONTRIBUTION, PackedLights, PairParams, box_d2, falloff
 from lightsched.scene import FADING_IN, FADING_OUT, ON, POINT, SPOT
 from lightsched.walk import _finish_hits
 
@@ -108,7 +110,7 @@ def _compiled(in_register: bool):
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
              np.zeros(1), 0, 0)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
-        held(0, 0, 1, case[2][1], (case[3],), case[4], case[5], held_rules(case))
+        held(0, 0, 1, tuple(case[3]), (case[4],), case[5], case[6], held_rules(case))
         return run, hits, spot, candidates, held
     finally:
         simd.PACK_IN_REGISTER = before
@@ -186,8 +188,8 @@ def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0
                         np.full(n, -9, np.int32), np.full((n, k), -9, np.int8),
                         np.ones(n, np.bool_))
     params = FadeParams(0.1, 0.05, 0.25 if fade_in else 1.0, 0.25, float(fade_in), 0.2)
-    heap = (np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
-    return (np.arange(n, dtype=np.int64), (visible, reset), (seg, heap), live_id,
+    heap = PairHeap(np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
+    return (np.arange(n, dtype=np.int64), (visible, reset), seg, heap, live_id,
             SlotState(s_id, s_w, s_st, s_sel), out, params,
             SlotShadows(shadow_of_row, int(max_shadowed)),
             (0,) * k)
@@ -195,7 +197,7 @@ def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0
 
 def held_rules(case):
     """held_row's rules for a case of pass_arguments, as object_pass makes them."""
-    _, _, _, _, _, _, params, (shadow_of_row, max_shadowed), _ = case
+    _, _, _, _, _, _, _, params, (shadow_of_row, max_shadowed), _ = case
     q = max_shadowed if (shadow_of_row >= 0).any() and max_shadowed > 0 else 0
     return (shadow_of_row, np.int64(q), params[0], params[1], params[2], params[4])
 
@@ -206,13 +208,14 @@ def check_held(case, kinds, packings):
     bit for bit; and held_row alone, for each packing, gives each object's row of them
     or -1 with nothing written, and takes every "held" and "fading" object of 1-8 pairs,
     or of 9-16 pairs with more than 8 competing."""
-    run, objs, (seg, heap), live_id, state, out, params, shadow, k_static = case
-    strided = np.zeros(2 * heap[0].size)[::2]
-    strided[:] = heap[0]
+    run, objs, seg, heap, live_id, state, out, params, shadow, k_static = case
+    strided = np.zeros(2 * heap.p.size)[::2]
+    strided[:] = heap.p
     want = copy.deepcopy((state, out))
-    object_pass(run, objs, (seg, (strided, heap[1])), live_id, *want, params, shadow, k_static)
+    object_pass(run, objs, seg, PairHeap(strided, heap.light_row), live_id, *want, params,
+                shadow, k_static)
     got = copy.deepcopy((state, out))
-    object_pass(run, objs, (seg, heap), live_id, *got, params, shadow, k_static)
+    object_pass(run, objs, seg, heap, live_id, *got, params, shadow, k_static)
     for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
     rules = held_rules(case)
@@ -222,7 +225,7 @@ def check_held(case, kinds, packings):
             if not objs[0][o] or objs[1][o] or not 1 <= n <= 2 * simd.LANES:
                 continue
             mine = copy.deepcopy((state, out))
-            cand = HELD[packing](o, seg[o, 0], n, heap, (live_id,), *mine, rules)
+            cand = HELD[packing](o, seg[o, 0], n, tuple(heap), (live_id,), *mine, rules)
             wide = want[1][6][o] > simd.LANES
             taken = kind in ("held", "fading") and (n > simd.LANES) == wide
             assert cand >= 0 or not taken, (o, kind)
@@ -279,7 +282,7 @@ def test_point_run_equals_the_scalar_rule(case, start):
     lo, hi, masks, rows, v0, v1, light = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
-    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+    visible_objects(lo, hi, masks, np.arange(n), n, Records(recs, recs.view(np.int64), np.arange(n)),
                     np.zeros(3))
     bits = recs.view(np.int64)
     size = start + (v1 - v0) + 16
@@ -336,7 +339,7 @@ def test_spot_priority_equals_the_scalar_rule(case, cone, start):
     lo, hi, masks, rows, v0, v1, light = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
-    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+    visible_objects(lo, hi, masks, np.arange(n), n, Records(recs, recs.view(np.int64), np.arange(n)),
                     np.zeros(3))
     hot = np.array([[*light[:5], SPOT * 8, *light[5:]]])
     lf = np.zeros((1, 8))
@@ -368,7 +371,7 @@ def test_spot_priority_on_a_cloud_around_the_cone(packing):
     lo, hi = centre - half, centre + half
     recs = np.zeros((n, 8))
     visible_objects(lo, hi, np.full(n, 0xFFFFFFFF, np.uint32), np.arange(n), n,
-                    (recs, recs.view(np.int64)), np.zeros(3))
+                    Records(recs, recs.view(np.int64), np.arange(n)), np.zeros(3))
     rows = rng.permutation(n).astype(np.int64)
     light = (0.5, 0.25, -0.5, 25.0, float(0xFFFFFFFF), 40.0, 0.5)
     hot = np.array([[*light[:5], SPOT * 8, *light[5:]]])
@@ -403,7 +406,7 @@ def test_point_run_reads_to_the_last_record_and_no_further(packing):
     hi = lo + rng.uniform(0, 3, (n, 3))
     recs = np.zeros((n, 8))
     visible_objects(lo, hi, np.full(n, 0xFFFFFFFF, np.uint32), np.arange(n), n,
-                    (recs, recs.view(np.int64)), np.zeros(3))
+                    Records(recs, recs.view(np.int64), np.arange(n)), np.zeros(3))
     rows = np.arange(n, dtype=np.int64)
     light = (0.0, 0.0, 0.0, 1e4, float(0xFFFFFFFF), 1.0, 0.0)
     for v0, v1 in [(0, n), (n - 3, n), (n - 9, n)] + [(5, 5 + k) for k in range(18)]:
@@ -430,8 +433,9 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
 def scalar_candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
     """candidates.scalar_candidates (candidate_pairs' scalar loop) for one object under the
     contribution model, with candidate_run's arguments."""
-    return pairs_scalar(box, np.int64(box.view(np.int64)[o, 6]), o, (hot, lf), compete, c_j,
-                        a, b, (out_p, out_j), m, PairParams(MODEL_CONTRIBUTION, 0.0, 0.0))
+    return pairs_scalar(box, np.int64(box.view(np.int64)[o, 6]), o, PackedLights(hot, lf),
+                        compete, c_j, a, b, PairHeap(out_p, out_j), m,
+                        PairParams(MODEL_CONTRIBUTION, 0.0, 0.0))
 
 
 @st.composite
@@ -475,7 +479,7 @@ def test_candidate_run_equals_the_scalar_loop(case, start):
     lo, hi, masks, o, hot, lf, compete, c_j, a, b = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
-    visible_objects(lo, hi, masks, np.arange(n), n, (recs, recs.view(np.int64)),
+    visible_objects(lo, hi, masks, np.arange(n), n, Records(recs, recs.view(np.int64), np.arange(n)),
                     np.zeros(3))
     size = start + (b - a) + 16
     want = (np.full(size, SENTINEL_P), np.full(size, SENTINEL_ROW, np.int32))
@@ -499,7 +503,7 @@ def test_candidate_run_on_objects_around_spots_and_points(packing):
     recs = np.zeros((n, 8))
     masks = rng.choice(np.array([0xFFFFFFFF, 1, 2], np.uint32), n)
     visible_objects(centre - half, centre + half, masks, np.arange(n), n,
-                    (recs, recs.view(np.int64)), np.zeros(3))
+                    Records(recs, recs.view(np.int64), np.arange(n)), np.zeros(3))
     hot = np.zeros((n_l, 8))
     lf = np.zeros((n_l, 8))
     typ = np.where(np.arange(n_l) % 3 == 0, SPOT, POINT)
@@ -564,8 +568,8 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
     masks = rng.choice(np.array([0xFFFFFFFF, 1, 2, 0], np.uint32), n, p=[0.6, 0.15, 0.15, 0.1])
     recs = np.zeros((n, 8), dtype)
     bits = recs.view(np.int32 if dtype == np.float32 else np.int64)
-    visible_objects(centre - half, centre + half, masks, np.arange(n), n, (recs, bits),
-                    np.zeros(3))
+    visible_objects(centre - half, centre + half, masks, np.arange(n), n,
+                    Records(recs, bits, np.arange(n)), np.zeros(3))
     if dtype == np.float64:
         hide = rng.uniform(size=n) < 0.15
         bits[hide, 6] = (masks[hide].astype(np.uint64) << np.uint64(32)).view(np.int64)
@@ -593,7 +597,7 @@ def candidate_scene(rng, n, n_l, dtype=np.float64):
         c_j += rng.permutation(n_l)[:lengths[o]].tolist()
         c_j += rng.integers(0, n_l, rng.integers(0, 4)).tolist()  # the room's spare end
     c_j = np.array(c_j + [0], np.int32)
-    return (seg, c_j), (recs, bits), (hot, lf), compete
+    return FoundLists(seg, c_j), RowRecords(recs, bits), PackedLights(hot, lf), compete
 
 
 def check_stream(rng, n, n_l):
@@ -618,10 +622,10 @@ def check_stream(rng, n, n_l):
                 with _Packing(packing):
                     if room > used:
                         # A heap one record short of the room: nothing written.
-                        short = (out[0], out[1][:room - 1], out[2][:room - 1])
-                        assert kernel(*args, short, used) == (room, -1, dropped)
+                        short = PairHeap(out[1][:room - 1], out[2][:room - 1])
+                        assert kernel(*args, out[0], short, used) == (room, -1, dropped)
                         assert (out[0] == old_seg).all() and (out[2] == SENTINEL_ROW).all()
-                    end, wrote, gone = kernel(*args, out, used)
+                    end, wrote, gone = kernel(*args, out[0], PairHeap(out[1], out[2]), used)
                 assert end == room and gone == dropped
                 o_seg, o_p, o_j = out
                 assert wrote == o_seg[which, 1].sum()
@@ -630,9 +634,10 @@ def check_stream(rng, n, n_l):
                 assert (o_j[:used] == SENTINEL_ROW).all() and o_j[room] == SENTINEL_ROW
                 for r, o in enumerate(which):
                     want = (np.zeros(n_l), np.zeros(n_l, np.int32))
-                    ob = np.int64(recs[1][o, 6]) & simd.SHOWN
-                    end = pairs_scalar(recs[0], ob, o, lights, compete, c_j, seg[o, 0],
-                                       seg[o, 0] + (seg[o, 1] if ob else 0), want, 0, params)
+                    ob = np.int64(recs.bits[o, 6]) & simd.SHOWN
+                    end = pairs_scalar(recs.box, ob, o, lights, compete, c_j, seg[o, 0],
+                                       seg[o, 0] + (seg[o, 1] if ob else 0), PairHeap(*want), 0,
+                                       params)
                     a, m = o_seg[o]
                     assert m == end, (packing, dtype, o)
                     assert np.array_equal(o_p[a:a + m].view(np.int64),
@@ -689,9 +694,9 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     kinds = list(rng.choice(HELD_KINDS, 300))
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
-    seg = case[2][0]
-    taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], case[2][1], (case[3],),
-                                *copy.deepcopy((case[4], case[5])), held_rules(case))
+    seg = case[2]
+    taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], tuple(case[3]), (case[4],),
+                                *copy.deepcopy((case[5], case[6])), held_rules(case))
              for o in range(len(kinds)) if 1 <= seg[o, 1] <= 2 * simd.LANES]
     held = [cand for cand in taken if cand >= 0]
     assert 70 < len(held) < len(taken)
@@ -719,8 +724,8 @@ def test_held_row_keeps_the_selection_by_key():
     case = pass_arguments(rng, objects, live_ids(ids, np.ones(9, np.bool_)),
                           np.full(9, -1, np.int8), 0)
     check_held(case, ["keys tie"], PACKINGS)
-    assert HELD[PACKINGS[-1]](0, case[2][0][0, 0], 9, case[2][1], (case[3],),
-                              *copy.deepcopy((case[4], case[5])), held_rules(case)) == -1
+    assert HELD[PACKINGS[-1]](0, case[2][0, 0], 9, tuple(case[3]), (case[4],),
+                              *copy.deepcopy((case[5], case[6])), held_rules(case)) == -1
 
 
 HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
@@ -728,7 +733,7 @@ HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mm
 WITHOUT_AVX512 = """
 import numpy as np
 import lightsched.simd as simd
-from lightsched.grid import visible_objects
+from lightsched.grid import Records, visible_objects
 from test_simd import CANDIDATES, KERNELS, scalar_candidates, scalar_run
 assert not simd.PACK_IN_REGISTER and list(KERNELS) == [False]
 assert "zmm" not in "".join(KERNELS[False].inspect_asm().values())
@@ -739,7 +744,7 @@ lo = rng.uniform(-20, 20, (n, 3))
 hi = lo + rng.uniform(0, 6, (n, 3))
 recs = np.zeros((n, 8))
 visible_objects(lo, hi, rng.integers(0, 4, n).astype(np.uint32), np.arange(n), n,
-                (recs, recs.view(np.int64)), np.zeros(3))
+                Records(recs, recs.view(np.int64), np.arange(n)), np.zeros(3))
 rows = rng.permutation(n).astype(np.int64)
 for _ in range(300):
     v0 = int(rng.integers(0, n)); v1 = int(rng.integers(v0, n + 1))
