@@ -20,9 +20,12 @@ bench/core.py's, the difference is what this measures.
 
 Use it for changes of a few percent, which separate processes (bench/history.py) cannot
 resolve here: their run medians spread by +-10% from one minute to the next.
-Its own resolution, from A/A runs (``--base HEAD`` on a clean tree: the same code on both
-sides): at (100k, 10k) one run's median difference moves by up to ~0.5 ms with no change,
-its quartiles sometimes excluding zero (bench/RESULTS.md); repeat a run before trusting a
+A/A runs (the same commit on both sides, ``--base HEAD`` or ``--new X --base X``) are broken
+since issue 48: the "new" side runs 2-3x behind in every stage whichever side goes first
+(bench/RESULTS.md, issue 48); a swap of the roles (``--base B --new A`` against ``--base A``)
+checks a difference instead. Earlier, its resolution from A/A runs: at (100k, 10k) one
+run's median difference moved by up to ~0.5 ms with no change, its quartiles sometimes
+excluding zero (bench/RESULTS.md); repeat a run before trusting a
 difference of that size. Until the sides both compiled, the working tree's loaded numba's
 cache and the base compiled: that alone put ~+0.5 ms on the working tree's object pass at
 (100k, 10k) (A/A +0.70 ms, objects 5.23 -> 5.71; with both compiling +0.05).
