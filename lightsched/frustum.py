@@ -253,15 +253,6 @@ ACROSS = 1
 IN = 2
 
 
-class GroupBoxes(NamedTuple):
-    """The groups of a grid of every object (grid.Grid's pos_of and group_box): group g
-    holds grid positions g*size..(g+1)*size-1."""
-
-    pos_of: np.ndarray  # int64 [N]: each object row's grid position
-    box: np.ndarray     # float64 [G, 6]: lo, hi round the boxes of the group's objects
-    size: int           # positions per group (grid.SWEEP_GROUP)
-
-
 class GroupPass(NamedTuple):
     """What a pass of objects_visible_groups over a grid's positions left, for the next
     pass over the same positions."""
@@ -310,7 +301,7 @@ def objects_visible_groups(at, plane_n, plane_p, groups, last):
     at: grid.BoxSource, the boxes as grid.group_boxes reads them (a grid's float64
     records in order: the objects of a group are then read as one run, not from 64 random
     rows, cache misses at large sizes); plane_n, plane_p [C, 6, 3]: the cameras' planes
-    (CameraFrames); groups: GroupBoxes of the grid; last: GroupPass of a pass over the
+    (CameraFrames); groups: grid.GroupBoxes; last: GroupPass of a pass over the
     same positions (objects may have moved since within their group boxes), classes of
     size 0 for none. Returns (visible [N], a box holding the visible objects, class [G]):
     the box is the IN groups' boxes and the visible objects' of the ACROSS ones, so it may

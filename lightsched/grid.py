@@ -313,6 +313,15 @@ class BoxSource(NamedTuple):
     by_row: bool
 
 
+class GroupBoxes(NamedTuple):
+    """The groups of a grid of every object (Grid's pos_of and group_box): group g holds
+    grid positions g*size..(g+1)*size-1."""
+
+    pos_of: np.ndarray  # int64 [N]: each object row's grid position
+    box: np.ndarray     # float64 [G, 6]: lo, hi round the boxes of the group's objects
+    size: int           # positions per group (SWEEP_GROUP)
+
+
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def group_boxes(at):
     """Per group of SWEEP_GROUP consecutive grid positions (parallel): the box round every

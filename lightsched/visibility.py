@@ -16,13 +16,12 @@ import numpy as np
 
 from .frustum import (
     Cameras,
-    GroupBoxes,
     GroupPass,
     lights_visible,
     objects_visible,
     objects_visible_groups,
 )
-from .grid import SWEEP_GROUP, group_boxes_of
+from .grid import SWEEP_GROUP, GroupBoxes, group_boxes_of
 from .scene import LightStore, ObjectStore
 
 if TYPE_CHECKING:

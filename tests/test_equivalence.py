@@ -223,8 +223,8 @@ def test_object_visibility_by_group_boxes_matches_oracle(cams, cams2, seed, n, o
     From the second pass on it is given the last pass's flags and classes too, and gives
     the same as without them. Its box holds the visible objects' and lies within the
     group boxes."""
-    from lightsched.frustum import IN, OUT, GroupBoxes, GroupPass, objects_visible_groups
-    from lightsched.grid import group_boxes, widen_group_boxes
+    from lightsched.frustum import IN, OUT, GroupPass, objects_visible_groups
+    from lightsched.grid import GroupBoxes, group_boxes, widen_group_boxes
 
     rng, lo, hi, f, want = _visibility_scene(cams, seed, n)
     if order == "cells":
