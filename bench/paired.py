@@ -3,6 +3,7 @@
     python bench/paired.py --base HEAD~1                          # full and lights10 at 100k
     python bench/paired.py --base fdf791a --sizes 1M:100k --scenarios all --frames 10
     python bench/paired.py --base 41b6ba6 --new 8008441 --first base    # two commits
+    python bench/paired.py --base 41b6ba6 --sizes 10k:1k --isolate 8     # a process a side
 
 The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
 and the working tree's copied, and both are imported under other names
@@ -17,6 +18,13 @@ given too: a change to work done every few frames (packing the pair cache) leave
 median difference near 0 and shows in the mean. The two schedulers hold two copies of the
 state, so each frame finds a colder cache than it would alone: the absolute times are above
 bench/core.py's, the difference is what this measures.
+
+``--isolate ROUNDS`` runs each side alone in a child process instead (loaded from numba's
+cache, as the service runs), ROUNDS times per size and scenario, the sides alternating; a
+round's two medians make one paired difference. Nothing of one side can touch the other's
+frames there (the in-process A/A artifact below cannot happen), at the price of the spread
+between processes: one commit's median at (10k, 1k) moved between 1.0 and 2.3 ms from one
+process to the next (bench/RESULTS.md, issue 48), so take 8 rounds or more.
 
 Use it for changes of a few percent, which separate processes (bench/history.py) cannot
 resolve here: their run medians spread by +-10% from one minute to the next.
@@ -45,11 +53,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
+import json
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -95,9 +105,11 @@ def new_side(commit: str | None, workdir: Path, copy: bool) -> Path:
     return extract(resolve(commit), workdir / "new")
 
 
-def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
-           seed: int, object_ids: str = "random") -> dict[str, Any]:
-    """Frames of both sides alternated; per side the frame times and stage seconds."""
+def run_frames(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int,
+               warmup: int, seed: int, object_ids: str = "random"
+               ) -> dict[str, tuple[list[float], list[dict[str, float]]]]:
+    """Each side's Scheduler on the same scene and motion, their frames alternated (A B,
+    then B A, ...); per side the timed frames' seconds and stage seconds."""
     scene = make_scene(n, l, seed, True, object_ids=object_ids)
     sides = {}
     for side, pkg in packages.items():
@@ -105,11 +117,11 @@ def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int,
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
         sides[side] = (s, Motion(scenario, scene, seed))
-    warmup = max(warmup, sides["new"][1].warmup_min)
-    times: dict[str, list[float]] = {side: [] for side in sides}
-    stages: dict[str, list[dict[str, float]]] = {side: [] for side in sides}
+    warmup = max(warmup, next(iter(sides.values()))[1].warmup_min)
+    out: dict[str, tuple[list[float], list[dict[str, float]]]] = {
+        side: ([], []) for side in sides}
     for i in range(warmup + frames):
-        for side in (("new", "base") if i % 2 else ("base", "new")):
+        for side in (list(sides)[::-1] if i % 2 else list(sides)):
             s, motion = sides[side]
             # Cameras as mappings: each package checks its own Camera class.
             cams = [dataclasses.asdict(c) for c in motion.step(s, i)]
@@ -117,17 +129,58 @@ def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int,
             f = s.frame(cams, dt=DT)
             t = time.perf_counter() - t0
             if i >= warmup:
-                times[side].append(t)
-                stages[side].append(dict(f.stats["seconds"]))
-    d = np.array(times["new"]) - np.array(times["base"])
-    return {"n": n, "l": l, "scenario": scenario, "frames": frames,
-            "new_ms": float(np.median(times["new"])) * 1e3,
-            "base_ms": float(np.median(times["base"])) * 1e3,
+                out[side][0].append(t)
+                out[side][1].append(dict(f.stats["seconds"]))
+    return out
+
+
+def stage_medians(stages: list[dict[str, float]]) -> dict[str, float]:
+    """Each stage's median seconds over frames, in ms."""
+    return {k: float(np.median([x.get(k, 0.0) for x in stages])) * 1e3 for k in stages[0]}
+
+
+def summary(new: list[float], base: list[float], stages: dict[str, dict[str, float]],
+            **about: Any) -> dict[str, Any]:
+    """The medians of paired samples (frames, or isolated rounds) and of their
+    differences (new - base), in ms."""
+    d = np.array(new) - np.array(base)
+    return {**about, "new_ms": float(np.median(new)) * 1e3,
+            "base_ms": float(np.median(base)) * 1e3,
             "diff_ms": float(np.median(d)) * 1e3,
             "diff_mean_ms": float(np.mean(d)) * 1e3,
             "diff_q_ms": [float(np.percentile(d, 25)) * 1e3, float(np.percentile(d, 75)) * 1e3],
-            "stages": {side: {k: float(np.median([x.get(k, 0.0) for x in v])) * 1e3
-                              for k in v[0]} for side, v in stages.items()}}
+            "stages": stages}
+
+
+def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
+           seed: int, object_ids: str = "random") -> dict[str, Any]:
+    """Both sides in this process, frame by frame."""
+    out = run_frames(packages, n, l, scenario, frames, warmup, seed, object_ids)
+    return summary(out["new"][0], out["base"][0],
+                   {side: stage_medians(st) for side, (_, st) in out.items()},
+                   n=n, l=l, scenario=scenario)
+
+
+def isolated(rest: list[str], workdir: Path, rounds: int, n: int, l: int, scenario: str
+             ) -> dict[str, Any]:
+    """Each side alone in a child process that loads it from numba's cache, ``rounds``
+    times, the sides alternating (A B, then B A, ...): per round each side's median frame,
+    paired by round. No state of one side can touch the other's frames here."""
+    medians: dict[str, list[float]] = {"new": [], "base": []}
+    stages: dict[str, list[dict[str, float]]] = {"new": [], "base": []}
+    for r in range(rounds):
+        for side in (("base", "new") if r % 2 else ("new", "base")):
+            child = subprocess.run(
+                [sys.executable, __file__, *rest, "--workdir", str(workdir), "--child", side,
+                 "--sizes", f"{n}:{l}", "--scenarios", scenario],
+                check=True, capture_output=True, text=True)
+            got = json.loads(child.stdout.strip().splitlines()[-1])
+            medians[side].append(got["frame_ms"] / 1e3)
+            stages[side].append(got["stages"])
+    return summary(medians["new"], medians["base"],
+                   {side: {k: float(np.median([x.get(k, 0.0) for x in v])) for k in v[0]}
+                    for side, v in stages.items()},
+                   n=n, l=l, scenario=scenario)
 
 
 def stage_moves(r: dict[str, Any], top: int = 3) -> str:
@@ -161,22 +214,34 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--first", choices=["new", "base"], default="new",
                    help="the side imported, compiled and given its Scheduler first (default "
                         "new): swapping it shows what the order alone does")
+    p.add_argument("--isolate", type=int, default=0, metavar="ROUNDS",
+                   help="run each side alone in a process of its own, ROUNDS times per "
+                        "size and scenario, the sides alternating; the kernels load from "
+                        "numba's cache (implies --cached both)")
     p.add_argument("--prime", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--child", choices=["new", "base"], help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.isolate:
+        args.cached = "both"
     base = resolve(args.base)
+    rest = list(sys.argv[1:] if argv is None else argv)
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(args.workdir) if args.workdir else Path(tmp)
         cached = {"new": args.cached in ("new", "both"), "base": args.cached in ("base", "both")}
+        if args.child:
+            return child(args, base, workdir)
         if any(cached.values()) and not args.prime:
             # The child copies and compiles both sides; the sides to load from the cache
             # are then imported from its copies, which kept their caches.
-            rest = list(sys.argv[1:] if argv is None else argv)
             subprocess.run([sys.executable, __file__, *rest, "--prime", "--workdir",
                             str(workdir)], check=True)
             paths = {"new": new_side(args.new, workdir, copy=False), "base": extract(base, workdir)}
         else:
             paths = {"new": new_side(args.new, workdir, copy=True), "base": extract(base, workdir)}
         order = ("new", "base") if args.first == "new" else ("base", "new")
+        if args.isolate and not args.prime:
+            return report(args, base, lambda n, l, scenario: isolated(
+                rest, workdir, args.isolate, n, l, scenario), {})
         packages = {side: load_package(paths[side], "lightsched_" + side,
                                        fresh=args.prime or not cached[side])
                     for side in order}
@@ -194,23 +259,48 @@ def main(argv: list[str] | None = None) -> int:
                 if importlib.util.find_spec(pkg.__name__ + ".warmup") is not None:
                     importlib.import_module(pkg.__name__ + ".warmup").warm_up()
             return 0
-        m = machine()
-        new = git_commit() if args.new is None else resolve(args.new)["sha"][:7]
-        say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); new side "
-            f"{new} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
-            f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}; "
-            f"first side: {args.first}")
-        say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
-            "| mean difference ms | stages that moved most (base -> working tree, ms) |")
-        say("|---|---|---|---|---|---|---|---|")
-        for n, l in parse_sizes(args.sizes):
-            for scenario in parse_scenarios(args.scenarios):
-                r = paired(packages, n, l, scenario, args.frames, args.warmup, args.seed,
-                           args.object_ids)
-                q = r["diff_q_ms"]
-                say(f"| {fmt_count(n)} | {fmt_count(l)} | {scenario} | {r['base_ms']:.2f} "
-                    f"| {r['new_ms']:.2f} | {r['diff_ms']:+.2f} ({q[0]:+.2f}..{q[1]:+.2f}) "
-                    f"| {r['diff_mean_ms']:+.2f} | {stage_moves(r)} |")
+        return report(args, base, lambda n, l, scenario: paired(
+            packages, n, l, scenario, args.frames, args.warmup, args.seed, args.object_ids),
+            packages)
+
+
+def child(args: argparse.Namespace, base: dict[str, str], workdir: Path) -> int:
+    """One side alone, loaded from the cache the prime wrote: its median frame and stage
+    medians as one line of JSON (for ``isolated``)."""
+    path = new_side(args.new, workdir, copy=False) if args.child == "new" else extract(
+        base, workdir)
+    pkg = load_package(path, "lightsched_" + args.child, fresh=False)
+    (n, l), = parse_sizes(args.sizes)
+    (scenario,) = parse_scenarios(args.scenarios)
+    times, stages = run_frames({args.child: pkg}, n, l, scenario, args.frames, args.warmup,
+                               args.seed, args.object_ids)[args.child]
+    print(json.dumps({"frame_ms": float(np.median(times)) * 1e3,
+                      "stages": stage_medians(stages)}))
+    return 0
+
+
+def report(args: argparse.Namespace, base: dict[str, str],
+           measure: Callable[[int, int, str], dict[str, Any]], packages: dict[str, Any]
+           ) -> int:
+    """The table: per size and scenario, ``measure``'s medians and differences."""
+    m = machine()
+    new = git_commit() if args.new is None else resolve(args.new)["sha"][:7]
+    how = (f"each side alone in a process, {args.isolate} rounds of {args.frames} frames"
+           if args.isolate else f"both sides in one process, first side: {args.first}")
+    say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); new side "
+        f"{new} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
+        f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}; {how}")
+    say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
+        "| mean difference ms | stages that moved most (base -> working tree, ms) |")
+    say("|---|---|---|---|---|---|---|---|")
+    for n, l in parse_sizes(args.sizes):
+        for scenario in parse_scenarios(args.scenarios):
+            r = measure(n, l, scenario)
+            q = r["diff_q_ms"]
+            say(f"| {fmt_count(n)} | {fmt_count(l)} | {scenario} | {r['base_ms']:.2f} "
+                f"| {r['new_ms']:.2f} | {r['diff_ms']:+.2f} ({q[0]:+.2f}..{q[1]:+.2f}) "
+                f"| {r['diff_mean_ms']:+.2f} | {stage_moves(r)} |")
+    if packages:
         say("numba kernels (signatures) loaded from the cache / compiled here: " + ", ".join(
             f"{side} {loaded} / {compiled}" for side, (loaded, compiled) in
             ((side, cache_counts(pkg)) for side, pkg in packages.items())))
