@@ -39,13 +39,18 @@ rule drops a NaN too (w = max(0, 1 - q*q) and min(1, a/e2) with a NaN second arg
 0/0 when r*r underflows), the box distance meets no NaN from finite coordinates, and -0.0
 against +0.0 is removed by squaring.
 
-Packing the lanes: with AVX-512 (avx512f and avx512vl in the features numba compiles for)
-into a register, then a masked store of the first lanes; elsewhere with the portable
-``llvm.masked.compressstore``, which LLVM lowers for any target. AVX-512's compress
-straight to memory is avoided, and so are gathers of the candidates' fields. With the range
-test alone in vector code (the pairs' rest cut out), the light pass at (100k, 10k) took 9.0
-ms one-thread scalar, 20.2 with gathers and the memory form, 11.3 with gathers and a
-register, 6.6 with masked loads of whole records, a transpose and a register.
+Packing the lanes (_compress_store, the one primitive here with a version per target,
+chosen by PACKING from the features numba compiles for): with AVX-512 (avx512f and
+avx512vl) vcompress packs them in a register; with AVX2 a table indexed by the lane mask
+gives a vpermps permutation (the standard left-pack; 64-bit lanes in two halves of four);
+both then store the first lanes with a masked store. Elsewhere each lane is stored, without
+a branch, either to its place or to a scratch slot. (LLVM's portable
+``llvm.masked.compressstore`` expands to a branch a lane on every target without a
+compress instruction.) AVX-512's compress straight to memory is avoided, and so are
+gathers of the candidates' fields. With the range test alone in vector code (the pairs'
+rest cut out), the light pass at (100k, 10k) took 9.0 ms one-thread scalar, 20.2 with
+gathers and the memory form, 11.3 with gathers and a register, 6.6 with masked loads of
+whole records, a transpose and a register.
 """
 
 from __future__ import annotations
@@ -90,14 +95,31 @@ def target_features() -> str:
     return get_host_cpu_features()
 
 
-def _has_avx512(features: str) -> bool:
+PACKINGS = ("avx512", "avx2", "portable")
+# Targets numba can be made to compile for on an x86 host (NUMBA_CPU_NAME, NUMBA_CPU_FEATURES),
+# so that one machine measures and tests the code of others: an AVX2 machine without
+# AVX-512 (most game developers' x86 machines) and x86-64 as every 64-bit x86 CPU has it.
+FORCED_TARGETS = {
+    "avx2": ("haswell", "+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,"
+                        "+mmx,+movbe,+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,"
+                        "+xsave,-avx512f,-avx512vl"),
+    "x86-64": ("x86-64", "+64bit,+cmov,+cx8,+fxsr,+mmx,+sse,+sse2,-avx,-avx2,-avx512f,"
+                         "-avx512vl"),
+}
+
+
+def packing_for(features: str) -> str:
+    """The left-pack (_compress_store) for a target's features: "avx512" (avx512f and
+    avx512vl), "avx2", or "portable" (any other target, aarch64 included)."""
     names = set(features.split(","))
-    return "+avx512f" in names and "+avx512vl" in names
+    if "+avx512f" in names and "+avx512vl" in names:
+        return "avx512"
+    return "avx2" if "+avx2" in names else "portable"
 
 
-# Read when a kernel that uses point_run is compiled (tests switch it to check the portable
-# lowering gives the same bits).
-PACK_IN_REGISTER = _has_avx512(target_features())
+# Read when a kernel that uses the intrinsics is compiled (tests switch it to check that
+# every packing the host can run gives the same bits).
+PACKING = packing_for(target_features())
 
 
 def _declare(builder: ir.IRBuilder, name: str, ret: ir.Type, args: list[ir.Type]) -> ir.Function:
@@ -107,7 +129,7 @@ def _declare(builder: ir.IRBuilder, name: str, ret: ir.Type, args: list[ir.Type]
 def _splat(builder: ir.IRBuilder, x: ir.Value, vty: ir.VectorType) -> ir.Value:
     v = builder.insert_element(ir.Constant(vty, ir.Undefined), x, ir.Constant(_I32, 0))
     return builder.shuffle_vector(v, ir.Constant(vty, ir.Undefined),
-                                  ir.Constant(_VI32, [0] * LANES))
+                                  ir.Constant(ir.VectorType(_I32, vty.count), [0] * vty.count))
 
 
 def _masked_load(builder: ir.IRBuilder, ptr: ir.Value, lanes: ir.Value, fill: ir.Value
@@ -156,11 +178,11 @@ class _Run:
     """IR of one point_run call (the light's constants as vectors) or of one step of
     candidate_run (eight lights' fields, one a lane), and the intrinsics."""
 
-    def __init__(self, builder: ir.IRBuilder, light: list[ir.Value], in_register: bool):
+    def __init__(self, builder: ir.IRBuilder, light: list[ir.Value], packing: str):
         """light = (x, y, z, r, mask, i, p_user): one light's scalars (splat to every
         lane) or vectors (one light a lane, as candidate_run takes them)."""
         b = self.b = builder
-        self.in_register = in_register
+        self.packing = packing
         self.zero = ir.Constant(_VF, [0.0] * LANES)
         self.one = ir.Constant(_VF, [1.0] * LANES)
         self.iota = ir.Constant(_VI64, list(range(LANES)))
@@ -308,36 +330,101 @@ class _Run:
     def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value) -> None:
         """Stores the lanes of ``values`` that hit, in lane order, from ``out`` on (count
         of them)."""
-        _compress_store(self.b, values, hit, out, count, self.in_register)
+        _compress_store(self.b, values, hit, out, count, self.packing)
 
 
 def _masked_store(builder: ir.IRBuilder, values: ir.Value, ptr: ir.Value, lanes: ir.Value
                   ) -> None:
     """Stores the lanes of ``values`` at ``ptr`` (a pointer to the vector type)."""
     suffix, size = _element(values.type)
-    fn = _declare(builder, f"llvm.masked.store.v8{suffix}.p0", ir.VoidType(),
-                  [values.type, ptr.type, _I32, _VB])
+    fn = _declare(builder, f"llvm.masked.store.v{values.type.count}{suffix}.p0", ir.VoidType(),
+                  [values.type, ptr.type, _I32, ir.VectorType(ir.IntType(1), values.type.count)])
     builder.call(fn, [values, ptr, ir.Constant(_I32, size), lanes])
 
 
+def _left_pack_rows(lanes: int, words: int) -> list[list[int]]:
+    """The AVX2 left-pack table: row m lists, for a lane mask m of ``lanes`` lanes, the
+    32-bit words of the set lanes in lane order (``words`` words a lane), as vpermd /
+    vpermps indices for 8 words; the rest 0 (never stored)."""
+    rows = []
+    for m in range(1 << lanes):
+        idx = [w for k in range(lanes) if m >> k & 1 for w in range(k * words, (k + 1) * words)]
+        rows.append(idx + [0] * (8 - len(idx)))
+    return rows
+
+
+def _left_pack_table(b: ir.IRBuilder, lanes: int, words: int) -> ir.GlobalVariable:
+    """_left_pack_rows as a constant of the module (one copy a module)."""
+    name = f"lightsched.left_pack.{lanes}x{words}"
+    if name in b.module.globals:
+        return b.module.globals[name]
+    rows = _left_pack_rows(lanes, words)
+    ty = ir.ArrayType(_VI32, len(rows))
+    table = ir.GlobalVariable(b.module, ty, name)
+    table.linkage = "internal"
+    table.global_constant = True
+    table.align = 32
+    table.initializer = ir.Constant(ty, [ir.Constant(_VI32, row) for row in rows])
+    return table
+
+
+def _permute(b: ir.IRBuilder, values: ir.Value, lanes: int, words: int, mask: ir.Value
+             ) -> ir.Value:
+    """``values`` (8 words: <8 x i32> or <4 x double>) with the lanes set in ``mask`` (i64,
+    ``lanes`` bits) moved to the front in order: one table row and one vpermps."""
+    idx = b.load(b.gep(_left_pack_table(b, lanes, words), [ir.Constant(_I32, 0), mask]),
+                 align=32)
+    vf32 = ir.VectorType(ir.FloatType(), 8)
+    permps = _declare(b, "llvm.x86.avx2.permps", vf32, [vf32, _VI32])
+    return b.bitcast(b.call(permps, [b.bitcast(values, vf32), idx]), values.type)
+
+
 def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Value,
-                    count: ir.Value, in_register: bool) -> None:
-    """Stores the lanes of ``values`` that hit, in lane order, from ``out`` (a pointer to
-    the element) on; ``count`` of them. With AVX-512 packed in a register, then the first
-    ``count`` lanes stored; else the portable compress store."""
+                    count: ir.Value, packing: str) -> None:
+    """Stores the lanes of ``values`` (8 lanes of 32 or 64 bits) that hit, in lane order,
+    from ``out`` (a pointer to the element) on; ``count`` of them; nothing past them.
+    ``packing`` (PACKINGS): "avx512" packs them in a register with vcompress, "avx2" with
+    a movemask-indexed table and vpermps (64-bit lanes a half of four at a time), both
+    then store the first lanes masked; "portable" stores every lane to its place or, if it
+    missed, to a scratch slot, without a branch."""
     vty = values.type
     suffix, size = _element(vty)
-    if in_register:
+    first = b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))), _splat(b, count, _VI64))
+    if packing == "avx512":
         name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
         packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
                         [values, ir.Constant(vty, [0] * LANES), hit])
-        first = b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))),
-                              _splat(b, count, _VI64))
         _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), first)
+    elif packing == "avx2" and size == 4:
+        mask = b.zext(b.bitcast(hit, _I8), _I64)
+        _masked_store(b, _permute(b, values, 8, 1, mask), b.bitcast(out, ir.PointerType(vty)),
+                      first)
+    elif packing == "avx2":
+        v4 = ir.VectorType(vty.element, 4)
+        iota4 = ir.Constant(ir.VectorType(_I64, 4), list(range(4)))
+        mask = b.zext(b.bitcast(hit, _I8), _I64)
+        at = out
+        left = count
+        for half in (0, 1):
+            part = b.shuffle_vector(values, ir.Constant(vty, ir.Undefined),
+                                    ir.Constant(ir.VectorType(_I32, 4),
+                                                list(range(4 * half, 4 * half + 4))))
+            bits = b.and_(b.lshr(mask, ir.Constant(_I64, 4 * half)), ir.Constant(_I64, 15))
+            packed = _permute(b, part, 4, 2, bits)
+            lanes = b.icmp_signed("<", iota4, _splat(b, left, ir.VectorType(_I64, 4)))
+            _masked_store(b, packed, b.bitcast(at, ir.PointerType(v4)), lanes)
+            if half == 0:
+                n_lo = b.call(_declare(b, "llvm.ctpop.i64", _I64, [_I64]), [bits])
+                at = b.gep(at, [n_lo])
+                left = b.sub(count, n_lo)
     else:
-        store = _declare(b, f"llvm.masked.compressstore.v8{suffix}", ir.VoidType(),
-                         [vty, ir.PointerType(vty.element), _VB])
-        b.call(store, [values, out, hit])
+        scratch = cgutils.alloca_once(b, vty.element)
+        n = ir.Constant(_I64, 0)
+        for k in range(LANES):
+            lane = ir.Constant(_I32, k)
+            on = b.extract_element(hit, lane)
+            b.store(b.extract_element(values, lane), b.select(on, b.gep(out, [n]), scratch))
+            n = b.add(n, b.zext(on, _I64))
 
 
 def _element(vty: ir.VectorType) -> tuple[str, int]:
@@ -368,7 +455,7 @@ def _lowering(context, builder, signature, args, at: tuple[int, ...], light_at: 
                                                                   args[k]).data,
                             ir.PointerType(t)) for k, t in zip(at, kinds, strict=True)]
     light = args[light_at]
-    run = _Run(builder, [builder.extract_value(light, k) for k in range(7)], PACK_IN_REGISTER)
+    run = _Run(builder, [builder.extract_value(light, k) for k in range(7)], PACKING)
     return run, ptrs
 
 
@@ -548,7 +635,7 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
             rows = builder.sext(rows32, _VI64)
             # Lanes past the end read light row 0, which exists (there are candidates).
             light = _Run.fields_at(builder, hot_ptr, rows)
-            run = _Run(builder, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            run = _Run(builder, [*light[:5], light[6], light[7]], PACKING)
             comp = _at_rows(builder, comp_ptr, rows32)
             live = builder.and_(lanes, builder.icmp_unsigned(
                 "!=", comp, ir.Constant(ir.VectorType(_I8, LANES), [0] * LANES)))
@@ -751,7 +838,7 @@ def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
             # Lanes past the end read light row 0 and object row 0, which exist.
             light = _Run.fields_at(b, hot_ptr, b.sext(rows32, _VI64))
             f = _Run.fields_at(b, box_ptr, b.sext(objs32, _VI64))
-            run = _Run(b, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            run = _Run(b, [*light[:5], light[6], light[7]], PACKING)
             comp = _at_rows(b, comp_ptr, rows32)
             live = b.and_(lanes, b.icmp_unsigned("!=", comp, ir.Constant(_V8I8, [0] * LANES)))
             hit, d2 = run.hits(f, live)
@@ -806,7 +893,7 @@ def stream_spots(typingctx, box, lights, stream, spots, n, out):
             rows = b.sext(_at_rows(b, sj_ptr, at), _VI64)
             f = _Run.fields_at(b, box_ptr, b.sext(_at_rows(b, so_ptr, at), _VI64))
             light = _Run.fields_at(b, hot_ptr, rows)
-            run = _Run(b, [*light[:5], light[6], light[7]], PACK_IN_REGISTER)
+            run = _Run(b, [*light[:5], light[6], light[7]], PACKING)
             hit, d2 = run.hits(f, lanes)
             meets, s = run.cone(f, _Run.fields_at(b, lf_ptr, rows)[:6])
             hit = b.and_(hit, meets)
@@ -858,8 +945,8 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
             m = b.load(m_slot)
             count = b.zext(b.call(popcount, [b.bitcast(hit, _I8)]), _I64)
             at = b.add(base, m)
-            _compress_store(b, p, hit, b.gep(hp_ptr, [at]), count, PACK_IN_REGISTER)
-            _compress_store(b, j, hit, b.gep(hj_ptr, [at]), count, PACK_IN_REGISTER)
+            _compress_store(b, p, hit, b.gep(hp_ptr, [at]), count, PACKING)
+            _compress_store(b, j, hit, b.gep(hj_ptr, [at]), count, PACKING)
             # Pairs before each lane: m plus an exclusive prefix sum of the hits.
             one = b.zext(hit, _VI64)
             total = one
@@ -1027,15 +1114,9 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
         def store_selection(sel, live):
             """The selection row: the live lanes' ids in lane order, -1 after them."""
             sel_ptr = row(5, 3, _I32)
-            if PACK_IN_REGISTER:
-                packed = b.call(_declare(b, "llvm.x86.avx512.mask.compress.v8i32", _VI32,
-                                         [_VI32, _VI32, _VB]), [sel, splat(-1, _VI32), live])
-                b.store(packed, sel_ptr, align=4)
-            else:
-                b.store(splat(-1, _VI32), sel_ptr, align=4)
-                b.call(_declare(b, "llvm.masked.compressstore.v8i32", ir.VoidType(),
-                                [_VI32, ir.PointerType(_I32), _VB]),
-                       [sel, b.bitcast(sel_ptr, ir.PointerType(_I32)), live])
+            b.store(splat(-1, _VI32), sel_ptr, align=4)
+            _compress_store(b, sel, live, b.bitcast(sel_ptr, ir.PointerType(_I32)),
+                            count(live), PACKING)
 
         a_, n_ = args[1], args[2]
         rules = args[7]
@@ -1193,6 +1274,6 @@ def prefetch_row(typingctx, table, row):
     return sig, codegen
 
 
-__all__ = ["LANES", "PACK_IN_REGISTER", "candidate_run", "held_row", "point_priority",
+__all__ = ["FORCED_TARGETS", "LANES", "PACKING", "PACKINGS", "candidate_run", "held_row", "point_priority",
            "point_run", "prefetch_row", "spot_priority", "stream_fill", "stream_pack",
            "stream_run", "stream_spots", "target_features"]

@@ -6,12 +6,14 @@ light pass finishes for other lights); simd.spot_priority == the spot branch;
 simd.candidate_run (one object against its candidate point and spot lights) == the scalar
 loop of candidates.candidate_pairs, and so does candidate_pairs' stream of every object's
 candidates (simd.stream_fill, stream_run, stream_spots, stream_pack). With both ways of
-packing the lanes (an AVX-512 register where the target has it, the portable compress
-store), and without a store past the pairs they append."""
+packing the lanes the target can run (simd.PACKINGS: AVX-512's compress, AVX2's
+table and vpermps, the portable branch-free stores), and without a store past the pairs
+they append."""
 
 from __future__ import annotations
 
 import copy
+import platform
 
 import numba as nb
 import numpy as np
@@ -72,11 +74,11 @@ def scalar_hits(box, bits, v0, v1, light, out_obj, out_p, n):
     return n
 
 
-def _compiled(in_register: bool):
+def _compiled(packing: str):
     """Fresh kernels around point_run (then point_priority: ``run``; alone: ``hits``),
-    lowered with the given packing (the flag is read when the intrinsic is lowered)."""
-    before = simd.PACK_IN_REGISTER
-    simd.PACK_IN_REGISTER = in_register
+    lowered with the given packing (simd.PACKING is read when the intrinsic is lowered)."""
+    before = simd.PACKING
+    simd.PACKING = packing
     try:
         @nb.njit(nogil=True, error_model="numpy")
         def run(box, rows, v0, v1, light, out_obj, out_p, n):
@@ -113,7 +115,7 @@ def _compiled(in_register: bool):
         held(0, 0, 1, tuple(case[3]), (case[4],), case[5], case[6], held_rules(case))
         return run, hits, spot, candidates, held
     finally:
-        simd.PACK_IN_REGISTER = before
+        simd.PACKING = before
 
 
 HELD_KINDS = ("held", "reordered", "outranked", "fading", "other", "reset", "hidden")
@@ -241,8 +243,9 @@ def check_held(case, kinds, packings):
                 assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), (o, kind, packing)
 
 
-# The register packing only where numba compiles for AVX-512 (it could not run elsewhere).
-PACKINGS = [False] + ([True] if simd.PACK_IN_REGISTER else [])
+# Every packing the target numba compiles for can run: the portable one everywhere, AVX2's
+# on AVX2 and AVX-512 targets, AVX-512's on those alone.
+PACKINGS = simd.PACKINGS[simd.PACKINGS.index(simd.PACKING):]
 COMPILED = {packing: _compiled(packing) for packing in PACKINGS}
 KERNELS = {packing: kernels[0] for packing, kernels in COMPILED.items()}
 HITS = {packing: kernels[1] for packing, kernels in COMPILED.items()}
@@ -541,15 +544,15 @@ class _Packing:
     """Kernels compiled inside take the given packing (read when an intrinsic is lowered,
     i.e. at a fresh dispatcher's first call)."""
 
-    def __init__(self, packing: bool):
+    def __init__(self, packing: str):
         self.packing = packing
 
     def __enter__(self):
-        self.before = simd.PACK_IN_REGISTER
-        simd.PACK_IN_REGISTER = self.packing
+        self.before = simd.PACKING
+        simd.PACKING = self.packing
 
     def __exit__(self, *exc):
-        simd.PACK_IN_REGISTER = self.before
+        simd.PACKING = self.before
 
 
 # candidate_pairs compiled afresh per packing (and record dtype), on first use.
@@ -728,16 +731,19 @@ def test_held_row_keeps_the_selection_by_key():
                               *copy.deepcopy((case[5], case[6])), held_rules(case)) == -1
 
 
-HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+fxsr,+lzcnt,+mmx,+movbe,"
-           "+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,-avx512f,-avx512vl")
 WITHOUT_AVX512 = """
 import numpy as np
 import lightsched.simd as simd
 from lightsched.grid import Records, visible_objects
 from test_simd import CANDIDATES, KERNELS, scalar_candidates, scalar_run
-assert not simd.PACK_IN_REGISTER and list(KERNELS) == [False]
-assert "zmm" not in "".join(KERNELS[False].inspect_asm().values())
-assert "zmm" not in "".join(CANDIDATES[False].inspect_asm().values())
+import sys
+packing = sys.argv[1]
+assert simd.PACKING == packing and list(KERNELS) == list(simd.PACKINGS[simd.PACKINGS.index(packing):])
+for kernels in (KERNELS, CANDIDATES):
+    asm = "".join(kernels[packing].inspect_asm().values())
+    assert "zmm" not in asm
+    assert ("vpermps" in asm) == (packing == "avx2"), packing
+    assert ("ymm" in asm) == (packing == "avx2"), packing
 rng = np.random.default_rng(5)
 n = 200
 lo = rng.uniform(-20, 20, (n, 3))
@@ -753,8 +759,10 @@ for _ in range(300):
     want = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
     got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
     k = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want, 3)
-    assert KERNELS[False](recs, rows, v0, v1, light, *got, 3) == k
-    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    for kernel in KERNELS.values():
+        got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
+        assert kernel(recs, rows, v0, v1, light, *got, 3) == k
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 n_l = 40
 hot = np.zeros((n_l, 8))
 hot[:, :3] = rng.uniform(-20, 20, (n_l, 3))
@@ -770,33 +778,40 @@ for o in range(n):
     want = (np.zeros(n_l), np.zeros(n_l, np.int32))
     got = (np.zeros(n_l), np.zeros(n_l, np.int32))
     k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
-    assert CANDIDATES[False](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
-    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    for kernel in CANDIDATES.values():
+        got = (np.zeros(n_l), np.zeros(n_l, np.int32))
+        assert kernel(recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 from test_simd import check_stream
 check_stream(np.random.default_rng(11), 600, 40)
 from test_simd import HELD, HELD_KINDS, check_held, held_case
-assert "zmm" not in "".join(HELD[False].inspect_asm().values())
+assert "zmm" not in "".join(HELD[packing].inspect_asm().values())
 rng = np.random.default_rng(7)
 kinds = list(rng.choice(HELD_KINDS, 200))
-check_held(held_case(rng, kinds, 30, 2, False), kinds, [False])
+check_held(held_case(rng, kinds, 30, 2, False), kinds, list(HELD))
 print("ok")
 """
 
 
 @pytest.mark.slow  # compiles the kernels again, into an empty cache
-def test_point_run_compiles_and_agrees_on_a_target_without_avx512(tmp_path):
-    """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell here) takes the portable
-    packing, emits no 512-bit code, and gives the scalar rule's pairs (point_run,
-    candidate_run and candidate_pairs' stream) and the scalar path's slots (held_row,
-    inside object_pass and alone)."""
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"),
+                    reason="numba forces x86 targets on x86 hosts only")
+@pytest.mark.parametrize("target,packing", [("avx2", "avx2"), ("x86-64", "portable")])
+def test_the_kernels_compile_and_agree_on_a_target_without_avx512(tmp_path, target, packing):
+    """Numba compiling for a CPU without AVX-512 (an AVX2 Haswell; x86-64 without AVX)
+    takes that target's packing, emits no 512-bit code (nor 256-bit without AVX), and
+    with every packing it can run gives the scalar rule's pairs (point_run, candidate_run
+    and candidate_pairs' stream) and the scalar path's slots (held_row, inside object_pass
+    and alone)."""
     import os
     import subprocess
     import sys
     from pathlib import Path
 
-    env = dict(os.environ, NUMBA_CPU_NAME="haswell", NUMBA_CPU_FEATURES=HASWELL,
+    cpu, features = simd.FORCED_TARGETS[target]
+    env = dict(os.environ, NUMBA_CPU_NAME=cpu, NUMBA_CPU_FEATURES=features,
                NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=str(Path(__file__).parent))
-    done = subprocess.run([sys.executable, "-c", WITHOUT_AVX512], env=env, capture_output=True,
-                          text=True, timeout=600)
+    done = subprocess.run([sys.executable, "-c", WITHOUT_AVX512, packing], env=env,
+                          capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip().endswith("ok")
