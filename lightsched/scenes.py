@@ -27,7 +27,7 @@ import numpy as np
 from .scene import DIRECTIONAL, POINT, SPOT, Camera, Config
 
 __all__ = ["CityScene", "city", "city_camera", "city_sequence", "city_side", "demo_scene",
-           "dungeon22", "large_world", "move_lights", "split_screen", "stadium"]
+           "dense", "dungeon22", "large_world", "move_lights", "split_screen", "stadium"]
 
 DT = 1.0 / 60.0
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
@@ -187,6 +187,40 @@ def city(n_objects: int, n_lights: int, seed: int = 0, spot_fraction: float = 0.
 def demo_scene(seed: int = 0, n_objects: int = 3000, n_lights: int = 300) -> CityScene:
     """The demo city: about 3000 objects and 300 lights, a few of them casting shadows."""
     return city(n_objects, n_lights, seed=seed, shadow_fraction=0.02, sun_shadows=True)
+
+
+def dense(n_objects: int = 10_000, n_lights: int = 1_000, seed: int = 0) -> CityScene:
+    """Random boxes among big point lights: every object is reached by about 33 competing
+    lights (41.9 away from the faces), so the object pass chooses K among many (issue 49).
+
+    A cube of side 1 km at 1000 lights, scaled with the cube root of ``n_lights`` / 1000 so
+    that the density of lights holds. Objects: half-extents 0.5..5 m, centres uniform in
+    the cube. Lights: point lights uniform in the cube, radius 100..300 m, intensity
+    1..100. One camera at twice the half-side from the centre, its far plane past the
+    cube's far corner, sees every object."""
+    if n_objects < 0 or n_lights < 0:
+        raise ValueError("n_objects and n_lights must be >= 0")
+    side = 1000.0 * (max(n_lights, 1) / 1000.0) ** (1.0 / 3.0)
+    h = 0.5 * side
+    obj_ss, light_ss = np.random.SeedSequence(seed).spawn(2)
+    rng = np.random.default_rng(obj_ss)
+    centre = rng.uniform(-h, h, (n_objects, 3))
+    half = rng.uniform(0.5, 5.0, (n_objects, 3))
+    objects = {"id": _ids(rng, n_objects), "bounds_min": centre - half,
+               "bounds_max": centre + half}
+    rng = np.random.default_rng(light_ss)
+    ltype = np.full(n_lights, POINT, np.uint8)
+    direction = np.zeros((n_lights, 3))
+    direction[:, 1] = -1.0
+    lights = _light_arrays(rng, ltype, rng.uniform(-h, h, (n_lights, 3)),
+                           rng.uniform(100.0, 300.0, n_lights), direction,
+                           np.full(n_lights, math.pi / 4), np.full(n_lights, 0.8),
+                           rng.uniform(1.0, 100.0, n_lights), np.zeros(n_lights, np.bool_))
+    camera = _look_camera((0.0, 0.5 * h, 2.0 * side), (0.0, 0.0, 0.0), fov_y=math.radians(70.0),
+                          far=4.0 * side)
+    params = {"n_objects": n_objects, "n_lights": n_lights}
+    return CityScene(lights=lights, objects=objects, cameras=[camera], side=side, seed=seed,
+                     params=params)
 
 
 def move_lights(lights: dict[str, np.ndarray], frame_index: int, speed: float = 3.0,
