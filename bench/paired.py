@@ -44,8 +44,8 @@ cache stores that module's machine code. A process that compiles runs the first 
 JIT linker resolves the copy's weak symbol to the definition loaded first), a process that
 loads the cache runs the copy optimised again: other code (for the object pass 2,524
 instructions against 2,074), ~0.5 ms slower in a (100k, 10k) frame. ``--cached both``
-measures the code the service and bench/core.py run (a child process compiles both sides
-first and writes their caches); ``--base HEAD --cached base`` measures the difference.
+measures the code the service and bench/core.py run (a child process a side compiles it
+first and writes its cache); ``--base HEAD --cached base`` measures the difference.
 """
 
 from __future__ import annotations
@@ -173,7 +173,9 @@ def isolated(rest: list[str], workdir: Path, rounds: int, n: int, l: int, scenar
             child = subprocess.run(
                 [sys.executable, __file__, *rest, "--workdir", str(workdir), "--child", side,
                  "--sizes", f"{n}:{l}", "--scenarios", scenario],
-                check=True, capture_output=True, text=True)
+                capture_output=True, text=True)
+            if child.returncode != 0:
+                raise SystemExit(f"{side} side, round {r}: {child.stderr[-3000:]}")
             got = json.loads(child.stdout.strip().splitlines()[-1])
             medians[side].append(got["frame_ms"] / 1e3)
             stages[side].append(got["stages"])
@@ -208,8 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                         "with numba caches only under --cached; default a temporary folder)")
     p.add_argument("--cached", choices=["none", "base", "new", "both"], default="none",
                    help="the sides that run the code numba loads from its cache, as the "
-                        "service does (a child process compiles them first, writing their "
-                        "caches); the others compile in this process (default none; the "
+                        "service does (a child process a side compiles it first, writing its "
+                        "cache); the others compile in this process (default none; the "
                         "module docstring says why the two differ)")
     p.add_argument("--first", choices=["new", "base"], default="new",
                    help="the side imported, compiled and given its Scheduler first (default "
@@ -228,48 +230,55 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(args.workdir) if args.workdir else Path(tmp)
         cached = {"new": args.cached in ("new", "both"), "base": args.cached in ("base", "both")}
+        if args.prime:
+            return prime(args, base, workdir)
         if args.child:
             return child(args, base, workdir)
-        if any(cached.values()) and not args.prime:
-            # The child copies and compiles both sides; the sides to load from the cache
-            # are then imported from its copies, which kept their caches.
-            subprocess.run([sys.executable, __file__, *rest, "--prime", "--workdir",
-                            str(workdir)], check=True)
-            paths = {"new": new_side(args.new, workdir, copy=False), "base": extract(base, workdir)}
-        else:
-            paths = {"new": new_side(args.new, workdir, copy=True), "base": extract(base, workdir)}
-        order = ("new", "base") if args.first == "new" else ("base", "new")
-        if args.isolate and not args.prime:
+        paths = {"new": new_side(args.new, workdir, copy=True), "base": extract(base, workdir)}
+        for side in (s for s in ("new", "base") if cached[s]):
+            # A child compiles the side and writes its cache, one side a process: a cache
+            # written with both sides in one process referred to the other side's module.
+            subprocess.run([sys.executable, __file__, *rest, "--prime", "--child", side,
+                            "--workdir", str(workdir)], check=True)
+        if args.isolate:
             return report(args, base, lambda n, l, scenario: isolated(
                 rest, workdir, args.isolate, n, l, scenario), {})
-        packages = {side: load_package(paths[side], "lightsched_" + side,
-                                       fresh=args.prime or not cached[side])
+        order = ("new", "base") if args.first == "new" else ("base", "new")
+        packages = {side: load_package(paths[side], "lightsched_" + side, fresh=not cached[side])
                     for side in order}
-        if args.prime:
-            # Every kernel and signature the timed run will call, compiled and cached (some
-            # arrays turn read-only, a signature of their own, after the first frames).
-            for n, l in parse_sizes(args.sizes):
-                for scenario in parse_scenarios(args.scenarios):
-                    paired(packages, n, l, scenario, 3, args.warmup, args.seed,
-                           args.object_ids)
-            # And every path's (a side's lightsched.warmup, where it has one): the timed
-            # frames may take paths the primed ones did not (a compile in a timed frame
-            # cost one run +0.3 s).
-            for pkg in packages.values():
-                if importlib.util.find_spec(pkg.__name__ + ".warmup") is not None:
-                    importlib.import_module(pkg.__name__ + ".warmup").warm_up()
-            return 0
         return report(args, base, lambda n, l, scenario: paired(
             packages, n, l, scenario, args.frames, args.warmup, args.seed, args.object_ids),
             packages)
 
 
+def side_package(args: argparse.Namespace, base: dict[str, str], workdir: Path, fresh: bool
+                 ) -> Any:
+    """The package of side ``args.child``, from the folder the parent made."""
+    path = new_side(args.new, workdir, copy=False) if args.child == "new" else extract(
+        base, workdir)
+    return load_package(path, "lightsched_" + args.child, fresh=fresh)
+
+
+def prime(args: argparse.Namespace, base: dict[str, str], workdir: Path) -> int:
+    """Compiles side ``args.child`` alone and writes its numba cache: every kernel and
+    signature the timed frames will call (some arrays turn read-only, a signature of their
+    own, after the first frames), and every path's (its lightsched.warmup, where it has
+    one: the timed frames may take paths the primed ones did not; a compile in a timed
+    frame cost one run +0.3 s)."""
+    pkg = side_package(args, base, workdir, fresh=True)
+    for n, l in parse_sizes(args.sizes):
+        for scenario in parse_scenarios(args.scenarios):
+            run_frames({args.child: pkg}, n, l, scenario, 3, args.warmup, args.seed,
+                       args.object_ids)
+    if importlib.util.find_spec(pkg.__name__ + ".warmup") is not None:
+        importlib.import_module(pkg.__name__ + ".warmup").warm_up()
+    return 0
+
+
 def child(args: argparse.Namespace, base: dict[str, str], workdir: Path) -> int:
     """One side alone, loaded from the cache the prime wrote: its median frame and stage
     medians as one line of JSON (for ``isolated``)."""
-    path = new_side(args.new, workdir, copy=False) if args.child == "new" else extract(
-        base, workdir)
-    pkg = load_package(path, "lightsched_" + args.child, fresh=False)
+    pkg = side_package(args, base, workdir, fresh=False)
     (n, l), = parse_sizes(args.sizes)
     (scenario,) = parse_scenarios(args.scenarios)
     times, stages = run_frames({args.child: pkg}, n, l, scenario, args.frames, args.warmup,
