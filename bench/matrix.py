@@ -2,6 +2,8 @@
 
     python bench/matrix.py                                        # everything, 3 rounds
     python bench/matrix.py --scenes dense --sizes 10k:1k --targets native,avx2 --rounds 5
+    python bench/matrix.py --scenes city,dense --sizes 100k:10k    # the stadium at 100k
+                                                                   # takes seconds a frame
 
 Scenes (lightsched.scenes), every point and spot light moving every frame, K = 8, the
 default Config (contribution model, fade and hysteresis on):
