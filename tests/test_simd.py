@@ -5,7 +5,7 @@ point_run alone == the range test and the mask (the hits' positions and d2, whic
 light pass finishes for other lights); simd.spot_priority == the spot branch;
 simd.candidate_run (one object against its candidate point and spot lights) == the scalar
 loop of candidates.candidate_pairs, and so does candidate_pairs' stream of every object's
-candidates (simd.stream_fill, stream_run, stream_spots, stream_pack). With both ways of
+candidates (simd.stream_fill, stream_run, stream_spots, stream_pack). With every way of
 packing the lanes the target can run (simd.PACKINGS: AVX-512's compress, AVX2's
 table and vpermps, the portable branch-free stores), and without a store past the pairs
 they append."""
@@ -757,7 +757,6 @@ for _ in range(300):
     light = (*rng.uniform(-20, 20, 3), float(rng.uniform(0.5, 15)), float(rng.integers(1, 4)),
              float(rng.uniform(0, 10)), 0.0)
     want = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
-    got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
     k = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want, 3)
     for kernel in KERNELS.values():
         got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
@@ -776,7 +775,6 @@ compete = rng.uniform(size=n_l) < 0.9
 c_j = rng.permutation(n_l).astype(np.int32)
 for o in range(n):
     want = (np.zeros(n_l), np.zeros(n_l, np.int32))
-    got = (np.zeros(n_l), np.zeros(n_l, np.int32))
     k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
     for kernel in CANDIDATES.values():
         got = (np.zeros(n_l), np.zeros(n_l, np.int32))
