@@ -389,16 +389,18 @@ def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Va
     missed, to a scratch slot, without a branch."""
     vty = values.type
     suffix, size = _element(vty)
-    first = b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))), _splat(b, count, _VI64))
+    def first() -> ir.Value:
+        return b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))), _splat(b, count, _VI64))
+
     if packing == "avx512":
         name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
         packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
                         [values, ir.Constant(vty, [0] * LANES), hit])
-        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), first)
+        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), first())
     elif packing == "avx2" and size == 4:
         mask = b.zext(b.bitcast(hit, _I8), _I64)
         _masked_store(b, _permute(b, values, 8, 1, mask), b.bitcast(out, ir.PointerType(vty)),
-                      first)
+                      first())
     elif packing == "avx2":
         v4 = ir.VectorType(vty.element, 4)
         iota4 = ir.Constant(ir.VectorType(_I64, 4), list(range(4)))
