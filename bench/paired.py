@@ -134,9 +134,9 @@ def run_frames(packages: dict[str, Any], n: int, l: int, scenario: str, frames: 
     return out
 
 
-def stage_medians(stages: list[dict[str, float]]) -> dict[str, float]:
-    """Each stage's median seconds over frames, in ms."""
-    return {k: float(np.median([x.get(k, 0.0) for x in stages])) * 1e3 for k in stages[0]}
+def stage_medians(stages: list[dict[str, float]], scale: float = 1e3) -> dict[str, float]:
+    """Each stage's median over frames (seconds) or rounds (ms, ``scale`` 1), in ms."""
+    return {k: float(np.median([x.get(k, 0.0) for x in stages])) * scale for k in stages[0]}
 
 
 def summary(new: list[float], base: list[float], stages: dict[str, dict[str, float]],
@@ -180,8 +180,7 @@ def isolated(rest: list[str], workdir: Path, rounds: int, n: int, l: int, scenar
             medians[side].append(got["frame_ms"] / 1e3)
             stages[side].append(got["stages"])
     return summary(medians["new"], medians["base"],
-                   {side: {k: float(np.median([x.get(k, 0.0) for x in v])) for k in v[0]}
-                    for side, v in stages.items()},
+                   {side: stage_medians(v, scale=1.0) for side, v in stages.items()},
                    n=n, l=l, scenario=scenario)
 
 
