@@ -1,5 +1,6 @@
 """What every benchmark script shares: printing, size parsing, the machine and commit a
-result was measured on, and writing a generated section into bench/RESULTS.md.
+result was measured on, the named scenes of issue 49's matrix, and writing a generated
+section into bench/RESULTS.md.
 
 Scripts run as ``python bench/<name>.py``, so this folder is on sys.path and they
 ``from common import ...``.
@@ -13,6 +14,7 @@ import platform
 import re
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -79,6 +81,27 @@ def machine() -> dict[str, str]:
             "numpy": np.__version__, "numba": numba.__version__,
             "numba_threads": str(numba.get_num_threads()),
             "os": f"{platform.system()} {platform.release()}"}
+
+
+# The matrix's scenes (issue 49): city (sparse, ~4 lights an object), dense (~33), stadium
+# (1,000 floodlights at every size: at 10,000 a (100k, 10k) stadium held 250M pairs and
+# ran out of 24 GiB); and how fast each one's lights move, in metres per second.
+SCENES = ("city", "dense", "stadium")
+SCENE_SPEED = {"city": 3.0, "dense": 60.0, "stadium": 3.0}  # dense: 1 m a 60 Hz frame
+STADIUM_LIGHTS = 1000
+
+
+def make_scene(scene: str, n: int, l: int, seed: int = 0) -> Any:
+    """The named scene (SCENES) with n objects and l lights (the stadium's are fixed)."""
+    from lightsched.scenes import city, dense, stadium
+
+    if scene == "city":
+        return city(n, l, seed=seed)
+    if scene == "dense":
+        return dense(n, l, seed=seed)
+    if scene == "stadium":
+        return stadium(n, seed=seed, n_lights=STADIUM_LIGHTS)
+    raise ValueError(f"unknown scene {scene!r}; scenes {SCENES}")
 
 
 def git_commit() -> str:

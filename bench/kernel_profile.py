@@ -3,9 +3,11 @@ kernel on the captured inputs of a real frame.
 
     python bench/kernel_profile.py                         # object_pass, city (10k, 1k), 1 thread
     python bench/kernel_profile.py --kernel group_pairs --size 100k:10k --seconds 8
+    python bench/kernel_profile.py --scene dense              # ~33 competing lights an object
+    python bench/kernel_profile.py --scene dense --time 30    # only the kernel's median time
 
-The scheduler runs a few full frames on a city (every light moving, as in `bench/core.py`'s
-`full` scenario); the named kernel's arguments are captured on the last one (every array
+The scheduler runs a few full frames on a scene of issue 49's matrix (city by default; every
+light moving, as in `bench/matrix.py`); the named kernel's arguments are captured on the last one (every array
 is copied before each call, so every call sees the same input). The
 kernel is then called in a loop while ``perf record -e cpu-clock`` samples the process:
 a software clock, so it works on this VM, which has no hardware counters (``perf stat``
@@ -39,11 +41,11 @@ import types
 from typing import Any
 
 import numpy as np
-from common import parse_sizes, say
+from common import SCENE_SPEED, SCENES, make_scene, parse_sizes, say
 
 import lightsched
 import lightsched.scheduler  # noqa: F401 - imports every stage's module
-from lightsched.scenes import city, move_lights
+from lightsched.scenes import move_lights
 from lightsched.tuning import Tuning
 
 WINDOW = 128  # bytes of code per reported window
@@ -80,9 +82,10 @@ def callers(kernel: str) -> list[types.ModuleType]:
     return found
 
 
-def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[Any, tuple]:
+def capture(kernel: str, scene_name: str, n_objects: int, n_lights: int,
+            frames: int) -> tuple[Any, tuple]:
     """The kernel (as the scheduler's stages call it) and its arguments at its last call,
-    on the last of ``frames`` full frames (every light moving) of city(n_objects, n_lights).
+    on the last of ``frames`` full frames (every light moving) of the named scene.
     Such frames take their pairs from candidate lists from the second on; but for the
     candidate kernels, they are captured with the lists off (Tuning.candidate_lists),
     walking every light as a frame without them does."""
@@ -100,13 +103,14 @@ def capture(kernel: str, n_objects: int, n_lights: int, frames: int) -> tuple[An
     for m in mods:
         setattr(m, kernel, grab)
     try:
-        scene = city(n_objects, n_lights, seed=0)
+        scene = make_scene(scene_name, n_objects, n_lights)
         s = lightsched.Scheduler(lightsched.Config(max_lights=8),
                                  Tuning(candidate_lists=kernel in CANDIDATE_KERNELS))
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
         for i in range(frames):
-            s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, i + 1))
+            s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, i + 1,
+                                                                     speed=SCENE_SPEED[scene_name]))
             s.frame(scene.cameras, dt=1 / 60)
     finally:
         for m in mods:
@@ -123,7 +127,9 @@ def fresh(args: tuple) -> tuple:
         if isinstance(x, np.ndarray):
             return x.copy()
         if isinstance(x, tuple):
-            return tuple(copy(y) for y in x)
+            items = [copy(y) for y in x]
+            # (A NamedTuple stays one: the kernels read their fields by name.)
+            return type(x)(*items) if hasattr(x, "_fields") else tuple(items)
         return x
     return copy(args)
 
@@ -181,23 +187,45 @@ def listing(ips: list[int], share: float) -> tuple[list[tuple[int, int, str]], i
     return rows, sum(c for ip, c in count.items() if lo <= ip < hi)
 
 
+def time_calls(a: argparse.Namespace) -> None:
+    """The kernel's median time over ``a.time`` calls, each on fresh copies of its inputs
+    (the copies untimed). With another commit's lightsched first on PYTHONPATH (and its own
+    NUMBA_CACHE_DIR), the same scene times that commit's kernel."""
+    (n, n_lights), = parse_sizes(a.size)
+    kern, args = capture(a.kernel, a.scene, n, n_lights, a.frames)
+    times = []
+    for _ in range(a.time + 1):  # the first call is not counted
+        fresh_args = fresh(args)
+        t0 = time.perf_counter()
+        kern(*fresh_args)
+        times.append(time.perf_counter() - t0)
+    say(f"{a.kernel}, {a.scene} ({a.size}), {os.environ.get('NUMBA_NUM_THREADS', 'all')} "
+        f"numba threads, lightsched from {os.path.dirname(lightsched.__file__)}: "
+        f"median {np.median(times[1:]) * 1e3:.2f} ms over {a.time} calls")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kernel", default="object_pass",
                     help="a kernel the scheduler's stages call (the name its module calls "
                          "it by)")
-    ap.add_argument("--size", default="10k:1k", help="N:L of the city")
+    ap.add_argument("--scene", default="city", choices=SCENES)
+    ap.add_argument("--size", default="10k:1k", help="N:L of the scene")
     ap.add_argument("--frames", type=int, default=6, help="frames before the capture")
     ap.add_argument("--seconds", type=float, default=5.0, help="sampling time")
     ap.add_argument("--windows", type=int, default=12, help="hottest windows printed")
     ap.add_argument("--out", default=os.path.join(tempfile.gettempdir(),
                                                   "kernel_profile.txt"))
+    ap.add_argument("--time", type=int, default=0, metavar="CALLS",
+                    help="only time the kernel: the median of CALLS calls (no perf)")
     a = ap.parse_args()
+    if a.time:
+        return time_calls(a)
     for tool in ("perf", "objdump"):
         if shutil.which(tool) is None:
             raise SystemExit(f"{tool} not found (Debian: linux-perf, binutils)")
     (n, n_lights), = parse_sizes(a.size)
-    kern, args = capture(a.kernel, n, n_lights, a.frames)
+    kern, args = capture(a.kernel, a.scene, n, n_lights, a.frames)
     kern(*fresh(args))  # compiled and warm
 
     def call():

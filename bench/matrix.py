@@ -37,30 +37,30 @@ import time
 from typing import Any
 
 import numpy as np
-from common import HERE, fmt_count, git_commit, machine, parse_sizes, say
+from common import (
+    HERE,
+    SCENE_SPEED,
+    SCENES,
+    STADIUM_LIGHTS,
+    fmt_count,
+    git_commit,
+    machine,
+    make_scene,
+    parse_sizes,
+    say,
+)
 
 from lightsched import Config, Scheduler
-from lightsched.scenes import DT, city, dense, move_lights, stadium
+from lightsched.scenes import DT, move_lights
 from lightsched.simd import FORCED_TARGETS
 
-SCENES = ("city", "dense", "stadium")
 TARGETS = ("native", *FORCED_TARGETS)
-SPEED = {"city": 3.0, "dense": 1.0 / DT, "stadium": 3.0}  # metres per second
 CACHE = HERE / ".cache" / "matrix"
-STADIUM_LIGHTS = 1000
-
-
-def make(scene: str, n: int, l: int, seed: int) -> Any:
-    if scene == "city":
-        return city(n, l, seed=seed)
-    if scene == "dense":
-        return dense(n, l, seed=seed)
-    return stadium(n, seed=seed, n_lights=STADIUM_LIGHTS)
 
 
 def run_case(scene: str, n: int, l: int, frames: int, warmup: int, seed: int) -> dict[str, Any]:
     """One scene's frames in this process: the medians of the timed ones."""
-    sc = make(scene, n, l, seed)
+    sc = make_scene(scene, n, l, seed)
     s = Scheduler(Config(max_lights=8))
     s.set_lights(**sc.lights)
     s.set_objects(**sc.objects)
@@ -68,7 +68,7 @@ def run_case(scene: str, n: int, l: int, frames: int, warmup: int, seed: int) ->
     for i in range(warmup + frames):
         if i:
             s.update_lights(id=sc.lights["id"],
-                            position=move_lights(sc.lights, i, speed=SPEED[scene]))
+                            position=move_lights(sc.lights, i, speed=SCENE_SPEED[scene]))
         t0 = time.perf_counter()
         f = s.frame(sc.cameras, dt=DT)
         t = time.perf_counter() - t0
