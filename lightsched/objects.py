@@ -17,9 +17,13 @@ from .frame import PER_OBJECT, copy_rows, held_elsewhere, rows_not_in
 from .jit import OBJECT_CHUNK, PRANGE_ONLY
 from .scene import ON
 from .select import (
+    CF_P,
+    CF_ROWS,
+    CI_ID,
+    CI_ROW,
+    CI_ROWS,
     F_NEW_P,
     F_NEW_W,
-    F_OLD_P,
     F_OLD_W,
     F_P,
     F_ROWS,
@@ -30,11 +34,11 @@ from .select import (
     I_OLD_ID,
     I_OLD_ROW,
     I_OLD_ST,
-    I_PREV_SEL,
     I_ROW,
     I_ROWS,
-    hysteresis_key,
-    topk_insert,
+    gather_live,
+    match_old_slots,
+    top_k,
 )
 from .shadows import pick_slot_shadows
 from .simd import LANES, held_row
@@ -95,27 +99,6 @@ def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -
     return out
 
 
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _match_old_slot(p, j, lid, sf, si):
-    """Records this frame's P and row for the object's old slot of light lid, if any.
-    Compares only inside the loop (it vectorises); the one store happens after it."""
-    slot = -1
-    for m in range(sf.shape[1]):
-        slot = m if si[I_OLD_ID, m] == lid else slot
-    if slot >= 0:
-        sf[F_OLD_P, slot] = p
-        si[I_OLD_ROW, slot] = j
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _select(p, j, lid, sf, si, nbest, h, h_abs):
-    """Offers light row j (id lid) with priority p to the object's top K (select.py):
-    hysteresis key, insert, and this frame's P / row for the object's old slot of that
-    light. Returns nbest."""
-    _match_old_slot(p, j, lid, sf, si)
-    return topk_insert(sf, si, nbest, hysteresis_key(p, lid, si, h, h_abs), lid, p, j)
-
-
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
@@ -168,7 +151,13 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
     for ch in nb.prange(n_chunks):
         sf = np.empty((F_ROWS, k))
         si = np.empty((I_ROWS, k), np.int64)
-        for r in range(ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)):
+        first, end = ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)
+        pool_size = k + 1
+        for r in range(first, end):
+            pool_size = max(pool_size, seg[run[r], 1])
+        cf = np.empty((CF_ROWS, pool_size))
+        ci = np.empty((CI_ROWS, pool_size), np.int64)
+        for r in range(first, end):
             o = run[r]
             if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
                 # The common case in vector code: slots held in last frame's order.
@@ -192,30 +181,17 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
                     si[I_OLD_ROW, m] = -1
                     n_old += lid >= 0
                     all_on &= (lid < 0) | (s_st[o, m] == ON)
-                # One pass counts the competing lights and keeps them while they fit in K,
-                # the common case: then every one is selected, no keys, no ranking.
-                for t in range(a, b):
-                    j = np.int64(heap_j[t])
-                    lid = np.int64(live_id[j])
-                    if lid >= 0:
-                        if cand < k:
-                            p = heap_p[t]
-                            _match_old_slot(p, j, lid, sf, si)
-                            sf[F_P, cand] = p
-                            si[I_ID, cand] = lid
-                            si[I_ROW, cand] = j
-                        cand += 1
+                cand = gather_live(heap_p, heap_j, live_id, a, b, cf, ci)
+                match_old_slots(cf, ci, cand, sf, si)
                 if cand <= k:
+                    # Every competing light is selected: no keys, no ranking.
+                    for t in range(cand):
+                        sf[F_P, t] = cf[CF_P, t]
+                        si[I_ID, t] = ci[CI_ID, t]
+                        si[I_ROW, t] = ci[CI_ROW, t]
                     nbest = cand
                 else:
-                    # (The first K old-slot matches are made again, to the same values.)
-                    for m in range(k):
-                        si[I_PREV_SEL, m] = s_sel[o, m]
-                    for t in range(a, b):
-                        j = np.int64(heap_j[t])
-                        lid = np.int64(live_id[j])
-                        if lid >= 0:
-                            nbest = _select(heap_p[t], j, lid, sf, si, nbest, h, h_abs)
+                    nbest = top_k(cf, ci, cand, s_sel, o, sf, si, h, h_abs)
                 held = False
                 if not reset[o] and all_on and n_old == nbest:
                     # Held when every old slot holds a selected light (filled slots come

@@ -1004,7 +1004,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
 
     Two cases, by the object's n pairs heap[a:a+n]: 1 <= n <= 8, all its competing lights
     selected, and 9 <= n <= 16 with more than K = 8 competing: the top K by the hysteresis
-    key (select.hysteresis_key against last frame's selection), which here must be the
+    key (select.raised_key for last frame's selection), which here must be the
     old slots: each ranks, by key, before every other competing light, and they are in
     order by key as well as by P (the selection's order, which the scalar path keeps).
     Writes each output row, the slot weights, the selection (as the scalar path keeps it:
@@ -1150,7 +1150,7 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
                 fabs = _declare(b, "llvm.fabs.v8f64", _VF, [_VF])
 
                 def key(p, ids):
-                    """select.hysteresis_key: P + h|P| + h_abs for last frame's selection."""
+                    """select.raised_key: P + h|P| + h_abs for last frame's selection."""
                     was = ir.Constant(_VB, [0] * LANES)
                     for r in range(LANES):
                         was = b.or_(was, b.icmp_signed("==", ids, turn(prev, r)))
