@@ -181,17 +181,23 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
                     si[I_OLD_ROW, m] = -1
                     n_old += lid >= 0
                     all_on &= (lid < 0) | (s_st[o, m] == ON)
-                cand = gather_live(heap_p, heap_j, live_id, a, b, cf, ci)
-                match_old_slots(cf, ci, cand, sf, si)
-                if cand <= k:
-                    # Every competing light is selected: no keys, no ranking.
-                    for t in range(cand):
-                        sf[F_P, t] = cf[CF_P, t]
-                        si[I_ID, t] = ci[CI_ID, t]
-                        si[I_ROW, t] = ci[CI_ROW, t]
+                if b - a <= k:
+                    # Every competing light is selected: gathered straight into the
+                    # selection's rows (the pool's), no keys, no ranking.
+                    cand = gather_live(heap_p, heap_j, live_id, a, b, sf, si)
+                    match_old_slots(sf, si, cand, sf, si)
                     nbest = cand
                 else:
-                    nbest = top_k(cf, ci, cand, s_sel, o, sf, si, h, h_abs)
+                    cand = gather_live(heap_p, heap_j, live_id, a, b, cf, ci)
+                    match_old_slots(cf, ci, cand, sf, si)
+                    if cand <= k:
+                        for t in range(cand):
+                            sf[F_P, t] = cf[CF_P, t]
+                            si[I_ID, t] = ci[CI_ID, t]
+                            si[I_ROW, t] = ci[CI_ROW, t]
+                        nbest = cand
+                    else:
+                        nbest = top_k(cf, ci, cand, s_sel, o, sf, si, h, h_abs)
                 held = False
                 if not reset[o] and all_on and n_old == nbest:
                     # Held when every old slot holds a selected light (filled slots come

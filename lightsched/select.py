@@ -40,12 +40,13 @@ I_ROWS = 10
 
 # The object's pool of competing lights, one column a light: float64 cf[CF_ROWS, n] and int64
 # ci[CI_ROWS, n], n at most its pair count. CF_P, CI_ID, CI_ROW: the live lights gathered;
-# CF_KEY: their keys; CF_S_*, CI_S_*: the
-# lights kept for ranking; CF_T_P, CI_T_*: the ranked ones at their places (column K takes
-# every place past K).
-CF_P, CF_KEY, CF_S_KEY, CF_S_P, CF_T_P = range(5)
+# CF_KEY: their keys; CF_S_*, CI_S_*: the lights kept for ranking; CF_T_P, CI_T_*: the
+# ranked ones at their places (column K takes every place past K). The gathered rows are
+# the selection's rows of sf, si (F_P, I_ID, I_ROW), so that when every pair fits in K the
+# object's scratch serves as its pool.
+CF_KEY, CF_P, CF_S_KEY, CF_S_P, CF_T_P = F_KEY, F_P, 2, 3, 4
 CF_ROWS = 5
-CI_ID, CI_ROW, CI_S_ID, CI_S_ROW, CI_T_ID, CI_T_ROW = range(6)
+CI_ID, CI_ROW, CI_S_ID, CI_S_ROW, CI_T_ID, CI_T_ROW = I_ID, I_ROW, 2, 3, 4, 5
 CI_ROWS = 6
 # Ranking by counting costs n^2 compares for n kept lights, in vector code; an insertion
 # K compares and a mispredicted branch a light. Past this many kept lights the insertion.
