@@ -379,6 +379,26 @@ def _permute(b: ir.IRBuilder, values: ir.Value, lanes: int, words: int, mask: ir
     return b.bitcast(b.call(permps, [b.bitcast(values, vf32), idx]), values.type)
 
 
+def _first_lanes(b: ir.IRBuilder, count: ir.Value) -> ir.Value:
+    """The lane mask of the first ``count`` (i64) of LANES lanes."""
+    return b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))), _splat(b, count, _VI64))
+
+
+def _packed(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, count: ir.Value,
+            fill: ir.Value, packing: str) -> ir.Value:
+    """The lanes of ``values`` that hit (``count`` of them) in lane order, then ``fill``'s
+    lanes, in a register: "avx512" (any lane width) by vcompress, "avx2" (32-bit lanes)
+    by a table row and vpermps."""
+    vty = values.type
+    suffix, size = _element(vty)
+    if packing == "avx512":
+        name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
+        return b.call(_declare(b, name, vty, [vty, vty, _VB]), [values, fill, hit])
+    assert packing == "avx2" and size == 4, "a register left-pack needs AVX-512 or 32-bit lanes"
+    permuted = _permute(b, values, 8, 1, b.zext(b.bitcast(hit, _I8), _I64))
+    return b.select(_first_lanes(b, count), permuted, fill)
+
+
 def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Value,
                     count: ir.Value, packing: str) -> None:
     """Stores the lanes of ``values`` (8 lanes of 32 or 64 bits) that hit, in lane order,
@@ -388,19 +408,10 @@ def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Va
     then store the first lanes masked; "portable" stores every lane to its place or, if it
     missed, to a scratch slot, without a branch."""
     vty = values.type
-    suffix, size = _element(vty)
-    def first() -> ir.Value:
-        return b.icmp_signed("<", ir.Constant(_VI64, list(range(LANES))), _splat(b, count, _VI64))
-
-    if packing == "avx512":
-        name = f"llvm.x86.avx512.mask.compress.v8{suffix}"
-        packed = b.call(_declare(b, name, vty, [vty, vty, _VB]),
-                        [values, ir.Constant(vty, [0] * LANES), hit])
-        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), first())
-    elif packing == "avx2" and size == 4:
-        mask = b.zext(b.bitcast(hit, _I8), _I64)
-        _masked_store(b, _permute(b, values, 8, 1, mask), b.bitcast(out, ir.PointerType(vty)),
-                      first())
+    _, size = _element(vty)
+    if packing == "avx512" or (packing == "avx2" and size == 4):
+        packed = _packed(b, values, hit, count, ir.Constant(vty, [0] * LANES), packing)
+        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), _first_lanes(b, count))
     elif packing == "avx2":
         v4 = ir.VectorType(vty.element, 4)
         iota4 = ir.Constant(ir.VectorType(_I64, 4), list(range(4)))
@@ -1116,9 +1127,14 @@ def held_row(typingctx, o, a, n, heap, lights, state, out, rules):
         def store_selection(sel, live):
             """The selection row: the live lanes' ids in lane order, -1 after them."""
             sel_ptr = row(5, 3, _I32)
-            b.store(splat(-1, _VI32), sel_ptr, align=4)
-            _compress_store(b, sel, live, b.bitcast(sel_ptr, ir.PointerType(_I32)),
-                            count(live), PACKING)
+            if PACKING == "portable":
+                b.store(splat(-1, _VI32), sel_ptr, align=4)
+                _compress_store(b, sel, live, b.bitcast(sel_ptr, ir.PointerType(_I32)),
+                                count(live), PACKING)
+            else:
+                # The whole row in one store: no masked store (slow on AMD's Zen 2 and 3).
+                b.store(_packed(b, sel, live, count(live), splat(-1, _VI32), PACKING),
+                        sel_ptr, align=4)
 
         a_, n_ = args[1], args[2]
         rules = args[7]
@@ -1276,6 +1292,6 @@ def prefetch_row(typingctx, table, row):
     return sig, codegen
 
 
-__all__ = ["FORCED_TARGETS", "LANES", "PACKING", "PACKINGS", "candidate_run", "held_row", "point_priority",
-           "point_run", "prefetch_row", "spot_priority", "stream_fill", "stream_pack",
+__all__ = ["FORCED_TARGETS", "LANES", "PACKING", "PACKINGS", "candidate_run", "held_row",
+           "point_priority", "point_run", "prefetch_row", "spot_priority", "stream_fill", "stream_pack",
            "stream_run", "stream_spots", "target_features"]
