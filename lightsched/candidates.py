@@ -330,7 +330,8 @@ def candidate_pairs(rows, lists, recs, lights, compete, dir_rows, params, seg, h
             b = a + (c_seg[o, 1] if ob != 0 else 0)
             if vector and b > a:
                 # Float64 records: eight candidates a step in vector code (-1: float32).
-                end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m)
+                end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m,
+                                    room[ch + 1])
                 if end >= 0:
                     a = b
                     m = end
@@ -374,7 +375,7 @@ def _stream_chunk(lists, recs, lights, compete, rows, r0, r1, room, seg, heap):
     if n_spots:
         stream_spots(box, (lights.hot, lights.f), stream, spots, n_spots, results)
     before = np.empty(n_s + LANES + 1, np.int64)
-    stream_pack(stream, results, n_s, (heap.p, heap.light_row), base, before)
+    stream_pack(stream, results, n_s, (heap.p, heap.light_row), base, room[1], before)
     for r in range(r0, r1):
         o = rows[r]
         a = before[starts[r - r0]]

@@ -94,7 +94,8 @@ def _record_pairs(o, recs, lights, compete, c_j, a, b, dir_rows, out, m, params,
         b = a
     if vector and b > a:
         # Float64 records: eight candidates a step in vector code (-1: float32).
-        end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m)
+        # One object at a time on one thread: the buffer past m is free.
+        end = candidate_run(box, o, hot, lf, compete, c_j, a, b, o_p, o_j, m, o_p.shape[0])
         if end >= 0:
             a = b
             m = end

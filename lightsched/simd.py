@@ -84,6 +84,7 @@ _VF = ir.VectorType(_F64, LANES)
 _VI64 = ir.VectorType(_I64, LANES)
 _VI32 = ir.VectorType(_I32, LANES)
 _VB = ir.VectorType(ir.IntType(1), LANES)
+_ALWAYS = ir.Constant(ir.IntType(1), 1)  # _store_lanes' room where the caller leaves slack
 
 
 def target_features() -> str:
@@ -260,10 +261,6 @@ class _Run:
                       [ptrs.type, _I32, _VB, fill.type])
         return b.call(fn, [ptrs, ir.Constant(_I32, size), lanes, fill])
 
-    def store(self, values: ir.Value, ptr: ir.Value, lanes: ir.Value) -> None:
-        """Stores the lanes of ``values`` at ``ptr``."""
-        _masked_store(self.b, values, ptr, lanes)
-
     def hits(self, f: list[ir.Value], lanes: ir.Value) -> tuple[ir.Value, ir.Value]:
         """(hit per lane, d2 per lane) of the light and the records' fields f: box_d2, then
         d2 <= r*r and the mask (priority.py)."""
@@ -327,10 +324,11 @@ class _Run:
     def sqrt(self, x: ir.Value) -> ir.Value:
         return self.b.call(_declare(self.b, "llvm.sqrt.v8f64", _VF, [_VF]), [x])
 
-    def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value) -> None:
+    def append(self, values: ir.Value, hit: ir.Value, out: ir.Value, count: ir.Value,
+               room: ir.Value | None = None) -> None:
         """Stores the lanes of ``values`` that hit, in lane order, from ``out`` on (count
-        of them)."""
-        _compress_store(self.b, values, hit, out, count, self.packing)
+        of them; ``room`` as _compress_store's)."""
+        _compress_store(self.b, values, hit, out, count, self.packing, room)
 
 
 def _masked_store(builder: ir.IRBuilder, values: ir.Value, ptr: ir.Value, lanes: ir.Value
@@ -399,19 +397,48 @@ def _packed(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, count: ir.Value,
     return b.select(_first_lanes(b, count), permuted, fill)
 
 
+def _store_lanes(b: ir.IRBuilder, values: ir.Value, ptr: ir.Value, lanes: ir.Value,
+                 room: ir.Value | None) -> None:
+    """Stores the lanes of ``values`` set in ``lanes`` at ``ptr`` (a pointer to the vector
+    type). Where ``room`` (i1; None: never) holds, the lanes past them are the caller's to
+    overwrite, and the whole vector goes in one plain store: a masked store is 42 uops
+    on AMD's Zen 2 and 3 (12 cycles, against one on Intel; uops.info), and held a third
+    of the candidate stream's samples there (bench/RESULTS.md, issue 49)."""
+    if room is None:
+        _masked_store(b, values, ptr, lanes)
+        return
+    _, size = _element(values.type)
+    if isinstance(room, ir.Constant):
+        assert room.constant, "room is a caller's promise: true, a test, or None"
+        b.store(values, ptr, align=size)
+        return
+    with b.if_else(room, likely=True) as (whole, part):
+        with whole:
+            b.store(values, ptr, align=size)
+        with part:
+            _masked_store(b, values, ptr, lanes)
+
+
+def _room_from(b: ir.IRBuilder, at: ir.Value, end: ir.Value) -> ir.Value:
+    """Whether the LANES elements from index ``at`` (i64) lie before ``end``."""
+    return b.icmp_signed("<=", b.add(at, ir.Constant(_I64, LANES)), end)
+
+
 def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Value,
-                    count: ir.Value, packing: str) -> None:
+                    count: ir.Value, packing: str, room: ir.Value | None = None) -> None:
     """Stores the lanes of ``values`` (8 lanes of 32 or 64 bits) that hit, in lane order,
-    from ``out`` (a pointer to the element) on; ``count`` of them; nothing past them.
-    ``packing`` (PACKINGS): "avx512" packs them in a register with vcompress, "avx2" with
-    a movemask-indexed table and vpermps (64-bit lanes a half of four at a time), both
-    then store the first lanes masked; "portable" stores every lane to its place or, if it
-    missed, to a scratch slot, without a branch."""
+    from ``out`` (a pointer to the element) on; ``count`` of them; nothing past them,
+    unless ``room`` (_store_lanes') says the LANES elements from ``out`` are the caller's
+    to overwrite. ``packing`` (PACKINGS): "avx512" packs them in a register with
+    vcompress, "avx2" with a movemask-indexed table and vpermps (64-bit lanes a half of
+    four at a time), both then store the first lanes (_store_lanes); "portable" stores
+    every lane to its place or, if it missed, to a scratch slot, without a branch."""
     vty = values.type
     _, size = _element(vty)
     if packing == "avx512" or (packing == "avx2" and size == 4):
         packed = _packed(b, values, hit, count, ir.Constant(vty, [0] * LANES), packing)
-        _masked_store(b, packed, b.bitcast(out, ir.PointerType(vty)), _first_lanes(b, count))
+        _store_lanes(b, packed, b.bitcast(out, ir.PointerType(vty)), _first_lanes(b, count),
+                     room)
     elif packing == "avx2":
         v4 = ir.VectorType(vty.element, 4)
         iota4 = ir.Constant(ir.VectorType(_I64, 4), list(range(4)))
@@ -425,7 +452,7 @@ def _compress_store(b: ir.IRBuilder, values: ir.Value, hit: ir.Value, out: ir.Va
             bits = b.and_(b.lshr(mask, ir.Constant(_I64, 4 * half)), ir.Constant(_I64, 15))
             packed = _permute(b, part, 4, 2, bits)
             lanes = b.icmp_signed("<", iota4, _splat(b, left, ir.VectorType(_I64, 4)))
-            _masked_store(b, packed, b.bitcast(at, ir.PointerType(v4)), lanes)
+            _store_lanes(b, packed, b.bitcast(at, ir.PointerType(v4)), lanes, room)
             if half == 0:
                 n_lo = b.call(_declare(b, "llvm.ctpop.i64", _I64, [_I64]), [bits])
                 at = b.gep(at, [n_lo])
@@ -473,7 +500,7 @@ def _lowering(context, builder, signature, args, at: tuple[int, ...], light_at: 
 
 
 @intrinsic(prefer_literal=False)
-def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
+def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n, end):
     """Appends the hits of one light's sphere among the records at positions v0..v1-1 of
     ``box`` ([V, 8] float64, C order) to out_obj (int32) / out_p (float64) from n, as
     (position, d2): the range test and the mask, not yet P; returns the new n.
@@ -481,20 +508,21 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
     the light pass does. light = (x, y, z, r, mask, i, p_user) as float64 (light_hot
     columns 0-4, 6, 7); box_rows (int64 [V], the records' object rows) is
     point_priority's; every array contiguous. The caller guarantees the room: at most one
-    pair per record. Float32 records ("fast" precision) are typed too, so that a kernel
+    pair per record; out_obj / out_p from n to ``end`` are its to overwrite (whole
+    stores while eight fit). Float32 records ("fast" precision) are typed too, so that a kernel
     holding both branches compiles, and return -1 at once: not handled, the caller runs its
     scalar loop."""
     if not _typed(box, box_rows, light, out_obj, out_p):
         return None
     sig = types.int64(box, box_rows, types.int64, types.int64, light, out_obj, out_p,
-                      types.int64)
+                      types.int64, types.int64)
 
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return ir.Constant(_I64, -1)
         run, (box_ptr, _, obj_ptr, p_ptr) = _lowering(context, builder, signature, args,
                                                       (0, 1, 5, 6), 4)
-        v0_, v1_, n0 = args[2], args[3], args[7]
+        v0_, v1_, n0, end = args[2], args[3], args[7], args[8]
         n_slot = cgutils.alloca_once_value(builder, n0)
 
         def step(v: ir.Value, left: ir.Value | None) -> None:
@@ -504,8 +532,9 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
             count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
             n = builder.load(n_slot)
             at = builder.add(_splat(builder, v, _VI64), run.iota)
-            run.append(builder.trunc(at, _VI32), hit, builder.gep(obj_ptr, [n]), count)
-            run.append(d2, hit, builder.gep(p_ptr, [n]), count)
+            room = _room_from(builder, n, end)
+            run.append(builder.trunc(at, _VI32), hit, builder.gep(obj_ptr, [n]), count, room)
+            run.append(d2, hit, builder.gep(p_ptr, [n]), count, room)
             builder.store(builder.add(n, count), n_slot)
 
         # Whole steps read their records without masks (a mask per record costs a compare
@@ -523,7 +552,7 @@ def point_run(typingctx, box, box_rows, v0, v1, light, out_obj, out_p, n):
 
 
 @intrinsic(prefer_literal=False)
-def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
+def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1, end):
     """Turns the (position, d2) that point_run left at n0..n1-1 of out_obj / out_p into
     (object row, P) in place, eight pairs a step: P is computed for the hits only (a
     quarter of the records in the city), and after the light's whole walk, when its
@@ -531,46 +560,50 @@ def point_priority(typingctx, box, box_rows, light, out_obj, out_p, n0, n1):
     records it does nothing (point_run left them to the scalar loop)."""
     if not _typed(box, box_rows, light, out_obj, out_p):
         return None
-    sig = types.void(box, box_rows, light, out_obj, out_p, types.int64, types.int64)
+    sig = types.void(box, box_rows, light, out_obj, out_p, types.int64, types.int64,
+                     types.int64)
 
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return context.get_dummy_value()
         run, (box_ptr, rows_ptr, obj_ptr, p_ptr) = _lowering(context, builder, signature,
                                                              args, (0, 1, 3, 4), 2)
-        n0_, n1_ = args[5], args[6]
+        n0_, n1_, end = args[5], args[6], args[7]
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
             lanes, p_at, obj_at, d2, at = run.hits_at(p_ptr, obj_ptr, i, n1_)
             e2_at = builder.add(builder.mul(at, ir.Constant(_VI64, [RECORD] * LANES)),
                                 ir.Constant(_VI64, [RECORD - 1] * LANES))
             e2 = run.gather(box_ptr, e2_at, lanes, run.zero)
             rows = run.gather(rows_ptr, at, lanes, ir.Constant(_VI64, [0] * LANES))
-            run.store(builder.fadd(run.priority(d2, e2, lanes), run.p_user), p_at, lanes)
-            run.store(builder.trunc(rows, _VI32), obj_at, lanes)
+            room = _room_from(builder, i, end)
+            _store_lanes(builder, builder.fadd(run.priority(d2, e2, lanes), run.p_user), p_at,
+                         lanes, room)
+            _store_lanes(builder, builder.trunc(rows, _VI32), obj_at, lanes, room)
         return context.get_dummy_value()
 
     return sig, codegen
 
 
 @intrinsic(prefer_literal=False)
-def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1):
+def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1, end):
     """point_priority for a spot light under the contribution model: of the (position, d2)
     that point_run left at n0..n1-1, keeps those whose bounding sphere meets the cone
     (priority.spot_cone), packed to the front from n0 as (object row, P = falloff * s +
     p_user), eight a step; returns the new end. spot = (axis x, y, z, cos o, sin o, cos
-    inner or NaN: light_f columns 0-5). For float32 records it returns -1 at once (the
-    scalar loop handled them)."""
+    inner or NaN: light_f columns 0-5); ``end`` as point_run's. For float32 records it
+    returns -1 at once (the scalar loop handled them)."""
     if not (_typed(box, box_rows, light, out_obj, out_p) and isinstance(spot, types.UniTuple)
             and spot.count == 6 and spot.dtype == types.float64):
         return None
-    sig = types.int64(box, box_rows, light, spot, out_obj, out_p, types.int64, types.int64)
+    sig = types.int64(box, box_rows, light, spot, out_obj, out_p, types.int64, types.int64,
+                      types.int64)
 
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
             return ir.Constant(_I64, -1)
         run, (box_ptr, rows_ptr, obj_ptr, p_ptr) = _lowering(context, builder, signature,
                                                              args, (0, 1, 4, 5), 2)
-        spot_, n0_, n1_ = args[3], args[6], args[7]
+        spot_, n0_, n1_, end = args[3], args[6], args[7], args[8]
         axis = [_splat(builder, builder.extract_value(spot_, k), _VF) for k in range(6)]
         m_slot = cgutils.alloca_once_value(builder, n0_)
         with cgutils.for_range_slice(builder, n0_, n1_, ir.Constant(_I64, LANES)) as (i, _):
@@ -583,8 +616,10 @@ def spot_priority(typingctx, box, box_rows, light, spot, out_obj, out_p, n0, n1)
             rows = run.gather(rows_ptr, at, hit, ir.Constant(_VI64, [0] * LANES))
             count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
             m = builder.load(m_slot)
-            run.append(builder.trunc(rows, _VI32), hit, builder.gep(obj_ptr, [m]), count)
-            run.append(p, hit, builder.gep(p_ptr, [m]), count)
+            # Whole stores from m <= i overwrite only entries this step has read.
+            room = _room_from(builder, m, end)
+            run.append(builder.trunc(rows, _VI32), hit, builder.gep(obj_ptr, [m]), count, room)
+            run.append(p, hit, builder.gep(p_ptr, [m]), count, room)
             builder.store(builder.add(m, count), m_slot)
         return builder.load(m_slot)
 
@@ -603,7 +638,7 @@ def _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j) -> bool:
 
 
 @intrinsic(prefer_literal=False)
-def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
+def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m, end):
     """The pairs of object row o (record o of ``box``, [N, 8] float64) with its candidate
     lights c_j[a:b] (point and spot rows of hot / lf, light_hot and light_f: [L, 8] float64
     each), appended from m to out_p (P) / out_j (light row), in candidate order; returns
@@ -618,11 +653,12 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
     (masked loads: where the light rows leave L2, as at (1M, 100k), every lane's row read
     is a cache miss). For float32 records ("fast") returns -1 at once: the caller
     runs its scalar loop. The caller guarantees the object has a mask bit (its record's
-    mask has a SHOWN bit) and the room: at most one pair per candidate."""
+    mask has a SHOWN bit) and the room: at most one pair per candidate; out_p / out_j
+    from m to ``end`` are its to overwrite (whole stores while eight fit)."""
     if not _candidate_typed(box, hot, lf, compete, c_j, out_p, out_j):
         return None
     sig = types.int64(box, types.int64, hot, lf, compete, c_j, types.int64, types.int64,
-                      out_p, out_j, types.int64)
+                      out_p, out_j, types.int64, types.int64)
 
     def codegen(context, builder, signature, args):
         if signature.args[0].dtype != types.float64:
@@ -633,7 +669,7 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
             builder.bitcast(context.make_array(signature.args[k])(context, builder,
                                                                   args[k]).data,
                             ir.PointerType(t)) for k, t in zip(at_, kinds, strict=True)]
-        o_, a_, b_, m0 = args[1], args[6], args[7], args[10]
+        o_, a_, b_, m0, end = args[1], args[6], args[7], args[10], args[11]
         rec = builder.load(builder.bitcast(
             builder.gep(box_ptr, [builder.mul(o_, ir.Constant(_I64, RECORD))]),
             ir.PointerType(_VF)), align=8)
@@ -668,8 +704,9 @@ def candidate_run(typingctx, box, o, hot, lf, compete, c_j, a, b, out_p, out_j, 
                              run.p_user)
             count = builder.zext(builder.call(run.popcount, [builder.bitcast(hit, _I8)]), _I64)
             m = builder.load(m_slot)
-            run.append(p, hit, builder.gep(p_ptr, [m]), count)
-            run.append(rows32, hit, builder.gep(j_ptr, [m]), count)
+            room = _room_from(builder, m, end)
+            run.append(p, hit, builder.gep(p_ptr, [m]), count, room)
+            run.append(rows32, hit, builder.gep(j_ptr, [m]), count, room)
             builder.store(builder.add(m, count), m_slot)
         return builder.load(m_slot)
 
@@ -814,7 +851,9 @@ def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
     it): its cone and spot factor are three square roots and three divisions on eight
     lanes, for the one lane in ten that is a spot, so they run on eight spots a step.
     Returns the spots listed. box [N, 8] float64 records in row order (float32: -1 at
-    once, nothing written), hot light_hot [L, 8], compete bool [L]."""
+    once, nothing written), hot light_hot [L, 8], compete bool [L]. ``out``'s arrays and
+    ``spots`` hold LANES entries past n, which the steps overwrite: their stores are
+    whole vectors (_store_lanes)."""
     if not (_records(box) and _array_of(hot, types.float64, 2)
             and _array_of(compete, types.boolean, 1) and _arrays_of(stream, _STREAM)
             and _arrays_of(out, _STREAM_OUT) and _array_of(spots, types.int32, 1)):
@@ -859,13 +898,14 @@ def stream_run(typingctx, box, hot, compete, stream, n, out, spots):
             point = b.and_(hit, b.not_(spot))
             # P * s with s = 1, as candidate_run has it: the same bits as P.
             p = b.fadd(b.fmul(run.priority(d2, f[7], point), run.one), run.p_user)
-            _masked_store(b, p, _vector_at(b, sp_ptr, i, _VF), lanes)
-            _masked_store(b, b.zext(point, _V8I8), _vector_at(b, sh_ptr, i, _V8I8), lanes)
+            _store_lanes(b, p, _vector_at(b, sp_ptr, i, _VF), lanes, _ALWAYS)
+            _store_lanes(b, b.zext(point, _V8I8), _vector_at(b, sh_ptr, i, _V8I8), lanes,
+                         _ALWAYS)
             in_range = b.and_(hit, spot)
             count = b.zext(b.call(run.popcount, [b.bitcast(in_range, _I8)]), _I64)
             ns = b.load(ns_slot)
             at = b.add(_splat(b, b.trunc(i, _I32), _VI32), iota32)
-            run.append(at, in_range, b.gep(spots_ptr, [ns]), count)
+            run.append(at, in_range, b.gep(spots_ptr, [ns]), count, _ALWAYS)
             b.store(b.add(ns, count), ns_slot)
         return b.load(ns_slot)
 
@@ -923,24 +963,27 @@ def stream_spots(typingctx, box, lights, stream, spots, n, out):
 
 
 @intrinsic(prefer_literal=False)
-def stream_pack(typingctx, stream, out, n, heap, base, before):
+def stream_pack(typingctx, stream, out, n, heap, base, end, before):
     """The pairs among the stream's first n entries (out's hit set) packed, in stream
     order, into heap = (P, light row) from ``base``: a compress store of eight entries a
-    step. before[i] = the pairs before entry i (before[n]: all), from which each object's
-    segment follows (candidates.candidate_pairs). Returns the pairs."""
+    step, whole while eight records fit before ``end`` (the heap's records from base to
+    end are the caller's to overwrite). before[i] = the pairs before entry i (before[n]:
+    all), from which each object's segment follows (candidates.candidate_pairs). The
+    stream, ``out`` and ``before`` hold LANES entries past n: they are read and written
+    eight whole entries a step. Returns the pairs."""
     if not (_arrays_of(stream, _STREAM) and _arrays_of(out, _STREAM_OUT)
             and _arrays_of(heap, ((types.float64, 1), (types.int32, 1)))
             and _array_of(before, types.int64, 1)):
         return None
-    sig = types.int64(stream, out, types.int64, heap, types.int64, before)
+    sig = types.int64(stream, out, types.int64, heap, types.int64, types.int64, before)
 
     def codegen(context, builder, signature, args):
         b = builder
         sj_ptr, _ = _tuple_data(context, b, signature.args[0], args[0], (_I32, _I32))
         sp_ptr, sh_ptr = _tuple_data(context, b, signature.args[1], args[1], (_F64, _I8))
         hp_ptr, hj_ptr = _tuple_data(context, b, signature.args[3], args[3], (_F64, _I32))
-        before_ptr = _data(context, b, signature.args[5], args[5], _I64)
-        n_, base = args[2], args[4]
+        before_ptr = _data(context, b, signature.args[6], args[6], _I64)
+        n_, base, end = args[2], args[4], args[5]
         iota = ir.Constant(_VI64, list(range(LANES)))
         zeros = ir.Constant(_VI64, [0] * LANES)
         popcount = _declare(b, "llvm.ctpop.i8", _I8, [_I8])
@@ -948,18 +991,18 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
         with cgutils.for_range_slice(b, ir.Constant(_I64, 0), n_, ir.Constant(_I64, LANES)
                                      ) as (i, _):
             lanes = b.icmp_signed("<", iota, _splat(b, b.sub(n_, i), _VI64))
-            h = _masked_load(b, _vector_at(b, sh_ptr, i, _V8I8), lanes,
-                             ir.Constant(_V8I8, [0] * LANES))
-            hit = b.icmp_unsigned("!=", h, ir.Constant(_V8I8, [0] * LANES))
-            p = _masked_load(b, _vector_at(b, sp_ptr, i, _VF), hit,
-                             ir.Constant(_VF, [0.0] * LANES))
-            j = _masked_load(b, _vector_at(b, sj_ptr, i, _VI32), hit,
-                             ir.Constant(_VI32, [0] * LANES))
+            # Whole loads: a masked load of bytes has no AVX2 instruction (LLVM tests and
+            # loads lane by lane), and the lanes that miss are never stored.
+            h = b.load(_vector_at(b, sh_ptr, i, _V8I8), align=1)
+            hit = b.and_(lanes, b.icmp_unsigned("!=", h, ir.Constant(_V8I8, [0] * LANES)))
+            p = b.load(_vector_at(b, sp_ptr, i, _VF), align=8)
+            j = b.load(_vector_at(b, sj_ptr, i, _VI32), align=4)
             m = b.load(m_slot)
             count = b.zext(b.call(popcount, [b.bitcast(hit, _I8)]), _I64)
             at = b.add(base, m)
-            _compress_store(b, p, hit, b.gep(hp_ptr, [at]), count, PACKING)
-            _compress_store(b, j, hit, b.gep(hj_ptr, [at]), count, PACKING)
+            room = _room_from(b, at, end)
+            _compress_store(b, p, hit, b.gep(hp_ptr, [at]), count, PACKING, room)
+            _compress_store(b, j, hit, b.gep(hj_ptr, [at]), count, PACKING, room)
             # Pairs before each lane: m plus an exclusive prefix sum of the hits.
             one = b.zext(hit, _VI64)
             total = one
@@ -967,8 +1010,8 @@ def stream_pack(typingctx, stream, out, n, heap, base, before):
                 moved = b.shuffle_vector(total, zeros, ir.Constant(
                     _VI32, [LANES if k < shift else k - shift for k in range(LANES)]))
                 total = b.add(total, moved)
-            _masked_store(b, b.add(b.sub(total, one), _splat(b, m, _VI64)),
-                          _vector_at(b, before_ptr, i, _VI64), lanes)
+            _store_lanes(b, b.add(b.sub(total, one), _splat(b, m, _VI64)),
+                         _vector_at(b, before_ptr, i, _VI64), lanes, _ALWAYS)
             b.store(b.add(m, count), m_slot)
         m = b.load(m_slot)
         b.store(m, b.gep(before_ptr, [n_]))

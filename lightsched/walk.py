@@ -236,6 +236,8 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
             lm = np.int64(hot[j, 4])
             typ = (np.int64(hot[j, 5]) >> 3) & 3
             n = offsets[t]
+            # The end of the light's segment: simd's whole stores may fill it up to there.
+            end = offsets[t + 1]
             if typ == DIRECTIONAL:
                 p = hot[j, 6] + hot[j, 7]
                 for v in range(n_vis):
@@ -248,17 +250,17 @@ def light_pass(lights, rows, grid, vis, offsets, pair_obj, pair_p, params):
             m, runs = light_runs(hot, j, g_f, dims, cell_start, ext, runs)
             for i in range(m):
                 n, keep = _run_pairs(runs[i, 0], runs[i, 1], hot, lf, j, lm, typ, vis_box,
-                                     vis_bits, vis_rows, pair_obj, pair_p, n, keep, model, w_obj,
-                                     w_int)
+                                     vis_bits, vis_rows, pair_obj, pair_p, n, end, keep, model,
+                                     w_obj, w_int)
             if vis_box.itemsize == 8:
                 # Float64 records: the walk left (position, d2) of the hits (simd.point_run).
                 if typ == POINT and model == MODEL_CONTRIBUTION:
                     point_priority(vis_box, vis_rows, _point_light(hot, j), pair_obj, pair_p,
-                                   offsets[t], n)
+                                   offsets[t], n, end)
                 elif typ == SPOT and model == MODEL_CONTRIBUTION:
                     spot = (lf[j, 0], lf[j, 1], lf[j, 2], lf[j, 3], lf[j, 4], lf[j, 5])
                     n = spot_priority(vis_box, vis_rows, _point_light(hot, j), spot, pair_obj,
-                                      pair_p, offsets[t], n)
+                                      pair_p, offsets[t], n, end)
                 else:
                     n = _finish_hits(hot, lf, j, typ, offsets[t], n, vis_box, vis_rows,
                                      pair_obj, pair_p, model, w_obj, w_int)
@@ -299,17 +301,19 @@ def _finish_hits(hot, lf, j, typ, n0, n1, vis_box, vis_rows, pair_obj, pair_p, m
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _run_pairs(v0, v1, hot, lf, j, lm, typ, vis_box, vis_bits, vis_rows, pair_obj, pair_p, n,
-               keep, model, w_obj, w_int):
-    """The pairs of light j with the objects at positions v0..v1-1, appended at n. Float64
+               end, keep, model, w_obj, w_int):
+    """The pairs of light j with the objects at positions v0..v1-1, appended at n (its
+    segment of the pair buffers ends at ``end``). Float64
     records go eight at a time through simd.point_run (the range test and the mask), which
     appends (position, d2) of the hits; light_pass finishes them after the walk. Float32
     records ("fast") take the scalar loop: the range test (exact, DESIGN's d2 <= r*r)
     compacts the survivors and their d2 into ``keep`` without branching (a test that fails
     at random would mispredict); the rest of Affects and P run on survivors only. Returns
     (new n, keep, regrown when short)."""
-    end = point_run(vis_box, vis_rows, v0, v1, _point_light(hot, j), pair_obj, pair_p, n)
-    if end >= 0:
-        return end, keep
+    hits_end = point_run(vis_box, vis_rows, v0, v1, _point_light(hot, j), pair_obj, pair_p, n,
+                         end)
+    if hits_end >= 0:
+        return hits_end, keep
     p0 = hot[j, 0]
     p1 = hot[j, 1]
     p2 = hot[j, 2]

@@ -46,6 +46,15 @@ SENTINEL_ROW = -7
 SENTINEL_P = -123.0
 
 
+def same_pairs(got: tuple, want: tuple, n: int, room: int) -> bool:
+    """The arrays of ``got`` hold ``want``'s first n entries bit for bit (those before the
+    pairs, too) and nothing written from ``room`` on: a kernel may store whole vectors
+    into the room its caller gives it (simd._store_lanes), never past it."""
+    return all(np.array_equal(g[:n].view(np.uint8), w[:n].view(np.uint8))
+               and np.array_equal(g[room:].view(np.uint8), w[room:].view(np.uint8))
+               for g, w in zip(got, want, strict=True))
+
+
 @nb.njit(nogil=True, error_model="numpy")
 def scalar_run(box, bits, rows, v0, v1, light, out_obj, out_p, n):
     """The scalar rule, record by record, as walk._exact_pair applies it to a point light
@@ -81,23 +90,24 @@ def _compiled(packing: str):
     simd.PACKING = packing
     try:
         @nb.njit(nogil=True, error_model="numpy")
-        def run(box, rows, v0, v1, light, out_obj, out_p, n):
-            end = simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
+        def run(box, rows, v0, v1, light, out_obj, out_p, n, room):
+            end = simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n, room)
             if end >= 0:
-                simd.point_priority(box, rows, light, out_obj, out_p, n, end)
+                simd.point_priority(box, rows, light, out_obj, out_p, n, end, room)
             return end
 
         @nb.njit(nogil=True, error_model="numpy")
-        def hits(box, rows, v0, v1, light, out_obj, out_p, n):
-            return simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n)
+        def hits(box, rows, v0, v1, light, out_obj, out_p, n, room):
+            return simd.point_run(box, rows, v0, v1, light, out_obj, out_p, n, room)
 
         @nb.njit(nogil=True, error_model="numpy")
-        def spot(box, rows, light, axis, out_obj, out_p, n0, n1):
-            return simd.spot_priority(box, rows, light, axis, out_obj, out_p, n0, n1)
+        def spot(box, rows, light, axis, out_obj, out_p, n0, n1, room):
+            return simd.spot_priority(box, rows, light, axis, out_obj, out_p, n0, n1, room)
 
         @nb.njit(nogil=True, error_model="numpy")
-        def candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m):
-            return simd.candidate_run(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m)
+        def candidates(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m, room):
+            return simd.candidate_run(box, o, hot, lf, compete, c_j, a, b, out_p, out_j, m,
+                                      room)
 
         @nb.njit(nogil=True, error_model="numpy")
         def held(o, a, n, heap, lights, state, out, shadow):
@@ -105,12 +115,12 @@ def _compiled(packing: str):
 
         box = np.zeros((1, 8))
         candidates(box, 0, box, box, np.ones(1, np.bool_), np.zeros(1, np.int32), 0, 1,
-                   np.zeros(1), np.zeros(1, np.int32), 0)
+                   np.zeros(1), np.zeros(1, np.int32), 0, 1)
         for kernel in (run, hits):
             kernel(box, np.zeros(1, np.int64), 0, 1, (0.0,) * 7, np.zeros(1, np.int32),
-                   np.zeros(1), 0)
+                   np.zeros(1), 0, 1)
         spot(box, np.zeros(1, np.int64), (0.0,) * 7, (0.0,) * 6, np.zeros(1, np.int32),
-             np.zeros(1), 0, 0)
+             np.zeros(1), 0, 0, 1)
         case = held_case(np.random.default_rng(0), ["held"], 1, 0, False)
         held(0, 0, 1, tuple(case[3]), (case[4],), case[5], case[6], held_rules(case))
         return run, hits, spot, candidates, held
@@ -280,8 +290,10 @@ def records_and_run(draw):
 
 
 @examples(3.0)
-@given(case=records_and_run(), start=st.integers(0, 5))
-def test_point_run_equals_the_scalar_rule(case, start):
+@given(case=records_and_run(), start=st.integers(0, 5), slack=st.integers(0, 16))
+def test_point_run_equals_the_scalar_rule(case, start, slack):
+    """point_run (then point_priority) == the scalar rule: the same pairs in the same
+    order, P bit for bit, nothing written before them nor past the room it is given."""
     lo, hi, masks, rows, v0, v1, light = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
@@ -289,26 +301,21 @@ def test_point_run_equals_the_scalar_rule(case, start):
                     np.zeros(3))
     bits = recs.view(np.int64)
     size = start + (v1 - v0) + 16
-    want_obj = np.full(size, SENTINEL_ROW, np.int32)
-    want_p = np.full(size, SENTINEL_P)
-    want = scalar_run(recs, bits, rows, v0, v1, light, want_obj, want_p, start)
-    for packing, kernel in KERNELS.items():
-        got_obj = np.full(size, SENTINEL_ROW, np.int32)
-        got_p = np.full(size, SENTINEL_P)
-        got = kernel(recs, rows, v0, v1, light, got_obj, got_p, start)
-        assert got == want, packing
-        # Same pairs in the same order, P bit for bit, and nothing written outside them.
-        assert np.array_equal(got_obj, want_obj), packing
-        assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
-    want_obj = np.full(size, SENTINEL_ROW, np.int32)
-    want_p = np.full(size, SENTINEL_P)
-    want = scalar_hits(recs, bits, v0, v1, light, want_obj, want_p, start)
-    for packing, kernel in HITS.items():
-        got_obj = np.full(size, SENTINEL_ROW, np.int32)
-        got_p = np.full(size, SENTINEL_P)
-        assert kernel(recs, rows, v0, v1, light, got_obj, got_p, start) == want, packing
-        assert np.array_equal(got_obj, want_obj), packing
-        assert np.array_equal(got_p.view(np.int64), want_p.view(np.int64)), packing
+    room = start + (v1 - v0) + slack
+
+    def sentinels():
+        return np.full(size, SENTINEL_ROW, np.int32), np.full(size, SENTINEL_P)
+
+    for scalar, kernels in ((scalar_run, KERNELS), (scalar_hits, HITS)):
+        want_out = sentinels()
+        if scalar is scalar_run:
+            want = scalar_run(recs, bits, rows, v0, v1, light, *want_out, start)
+        else:
+            want = scalar_hits(recs, bits, v0, v1, light, *want_out, start)
+        for packing, kernel in kernels.items():
+            got_out = sentinels()
+            assert kernel(recs, rows, v0, v1, light, *got_out, start, room) == want, packing
+            assert same_pairs(got_out, want_out, want, room), packing
 
 
 @nb.njit(nogil=True, error_model="numpy")
@@ -338,7 +345,8 @@ def spot_cones(draw):
 @given(case=records_and_run(), cone=spot_cones(), start=st.integers(0, 5))
 def test_spot_priority_equals_the_scalar_rule(case, cone, start):
     """spot_priority on point_run's hits == _finish_hits' spot branch: the same pairs kept
-    (bounding sphere meets the cone), in the same order, P bit for bit."""
+    (bounding sphere meets the cone), in the same order, P bit for bit; nothing written
+    past the room it is given (here: the hits)."""
     lo, hi, masks, rows, v0, v1, light = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
@@ -350,17 +358,13 @@ def test_spot_priority_equals_the_scalar_rule(case, cone, start):
     size = start + (v1 - v0) + 16
     for packing in PACKINGS:
         hits = (np.full(size, SENTINEL_ROW, np.int32), np.full(size, SENTINEL_P))
-        end = HITS[packing](recs, rows, v0, v1, light, *hits, start)
+        end = HITS[packing](recs, rows, v0, v1, light, *hits, start, size)
         want = tuple(a.copy() for a in hits)
         want_end = scalar_spot(recs, rows, hot, lf, *want, start, end)
         got = tuple(a.copy() for a in hits)
-        got_end = SPOTS[packing](recs, rows, light, cone, *got, start, end)
+        got_end = SPOTS[packing](recs, rows, light, cone, *got, start, end, end)
         assert got_end == want_end, packing
-        assert np.array_equal(got[0][:got_end], want[0][:want_end]), packing
-        assert np.array_equal(got[1][:got_end].view(np.int64),
-                              want[1][:want_end].view(np.int64)), packing
-        # Nothing written past the hits.
-        assert np.array_equal(got[0][end:], hits[0][end:]), packing
+        assert same_pairs(got, want, want_end, end), packing
 
 
 @pytest.mark.parametrize("packing", PACKINGS)
@@ -386,10 +390,10 @@ def test_spot_priority_on_a_cloud_around_the_cone(packing):
         lf = np.zeros((1, 8))
         lf[0, :6] = cone
         hits = (np.zeros(n, np.int32), np.zeros(n))
-        end = HITS[packing](recs, rows, 0, n, light, *hits, 0)
+        end = HITS[packing](recs, rows, 0, n, light, *hits, 0, n)
         want, got = tuple(a.copy() for a in hits), tuple(a.copy() for a in hits)
         want_end = scalar_spot(recs, rows, hot, lf, *want, 0, end)
-        assert SPOTS[packing](recs, rows, light, cone, *got, 0, end) == want_end
+        assert SPOTS[packing](recs, rows, light, cone, *got, 0, end, n) == want_end
         assert np.array_equal(got[0][:want_end], want[0][:want_end])
         assert np.array_equal(got[1][:want_end].view(np.int64),
                               want[1][:want_end].view(np.int64))
@@ -402,7 +406,9 @@ def test_spot_priority_on_a_cloud_around_the_cone(packing):
 @pytest.mark.parametrize("packing", PACKINGS)
 def test_point_run_reads_to_the_last_record_and_no_further(packing):
     """A run ending at the last record of the array (its final step reads fewer than eight
-    records) and runs of every length from 0 to 17 give the scalar rule's pairs."""
+    records) and runs of every length from 0 to 17 give the scalar rule's pairs; with a
+    light that reaches every record and a room of exactly one pair per record, nothing is
+    written past the room."""
     rng = np.random.default_rng(3)
     n = 37
     lo = rng.uniform(-10, 10, (n, 3))
@@ -413,12 +419,17 @@ def test_point_run_reads_to_the_last_record_and_no_further(packing):
     rows = np.arange(n, dtype=np.int64)
     light = (0.0, 0.0, 0.0, 1e4, float(0xFFFFFFFF), 1.0, 0.0)
     for v0, v1 in [(0, n), (n - 3, n), (n - 9, n)] + [(5, 5 + k) for k in range(18)]:
-        want_obj, got_obj = np.zeros(n, np.int32), np.zeros(n, np.int32)
-        want_p, got_p = np.zeros(n), np.zeros(n)
-        want = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, want_obj, want_p, 0)
-        assert want == v1 - v0  # a light reaching every record
-        assert KERNELS[packing](recs, rows, v0, v1, light, got_obj, got_p, 0) == want
-        assert np.array_equal(got_obj, want_obj) and np.array_equal(got_p, want_p)
+        for start in (0, 3):
+            room = start + v1 - v0
+
+            def sentinels():
+                return np.full(n + 16, SENTINEL_ROW, np.int32), np.full(n + 16, SENTINEL_P)
+
+            want_out, got_out = sentinels(), sentinels()
+            want = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want_out, start)
+            assert want == room  # a light reaching every record
+            assert KERNELS[packing](recs, rows, v0, v1, light, *got_out, start, room) == want
+            assert same_pairs(got_out, want_out, want, room)
 
 
 def test_point_run_leaves_float32_records_to_the_scalar_loop():
@@ -428,7 +439,7 @@ def test_point_run_leaves_float32_records_to_the_scalar_loop():
     out_obj, out_p = np.full(4, SENTINEL_ROW, np.int32), np.full(4, SENTINEL_P)
     light = (0.0, 0.0, 0.0, 10.0, float(0xFFFFFFFF), 1.0, 0.0)
     for kernel in KERNELS.values():
-        assert kernel(recs, np.arange(4), 0, 4, light, out_obj, out_p, 0) == -1
+        assert kernel(recs, np.arange(4), 0, 4, light, out_obj, out_p, 0, 4) == -1
     assert (out_obj == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
 
 
@@ -475,23 +486,24 @@ def object_and_candidates(draw):
 
 
 @examples(3.0)
-@given(case=object_and_candidates(), start=st.integers(0, 5))
-def test_candidate_run_equals_the_scalar_loop(case, start):
+@given(case=object_and_candidates(), start=st.integers(0, 5), slack=st.integers(0, 16))
+def test_candidate_run_equals_the_scalar_loop(case, start, slack):
     """candidate_run == candidate_pairs' scalar loop: the same pairs (the mask, the range
-    test, the cone of a spot) in candidate order, P bit for bit, nothing written past them."""
+    test, the cone of a spot) in candidate order, P bit for bit, nothing written before
+    them nor past the room it is given."""
     lo, hi, masks, o, hot, lf, compete, c_j, a, b = case
     n = lo.shape[0]
     recs = np.zeros((n, 8))
     visible_objects(lo, hi, masks, np.arange(n), n, Records(recs, recs.view(np.int64), np.arange(n)),
                     np.zeros(3))
     size = start + (b - a) + 16
+    room = start + (b - a) + slack
     want = (np.full(size, SENTINEL_P), np.full(size, SENTINEL_ROW, np.int32))
     want_end = scalar_candidates(recs, o, hot, lf, compete, c_j, a, b, *want, start)
     for packing, kernel in CANDIDATES.items():
         got = (np.full(size, SENTINEL_P), np.full(size, SENTINEL_ROW, np.int32))
-        assert kernel(recs, o, hot, lf, compete, c_j, a, b, *got, start) == want_end, packing
-        assert np.array_equal(got[0].view(np.int64), want[0].view(np.int64)), packing
-        assert np.array_equal(got[1], want[1]), packing
+        assert kernel(recs, o, hot, lf, compete, c_j, a, b, *got, start, room) == want_end
+        assert same_pairs(got, want, want_end, room), packing
 
 
 @pytest.mark.parametrize("packing", PACKINGS)
@@ -529,7 +541,7 @@ def test_candidate_run_on_objects_around_spots_and_points(packing):
         want = (np.zeros(n_l), np.zeros(n_l, np.int32))
         got = (np.zeros(n_l), np.zeros(n_l, np.int32))
         end = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
-        assert CANDIDATES[packing](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == end
+        assert CANDIDATES[packing](recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0, n_l) == end
         assert np.array_equal(got[0][:end].view(np.int64), want[0][:end].view(np.int64))
         assert np.array_equal(got[1][:end], want[1][:end])
         lit = set(want[1][:end][want[0][:end] - hot[want[1][:end], 7] > 0].tolist())
@@ -672,7 +684,7 @@ def test_candidate_run_leaves_float32_records_to_the_scalar_loop():
     @nb.njit(nogil=True, error_model="numpy")
     def run(box):
         return simd.candidate_run(box, 0, hot, hot, np.ones(1, np.bool_),
-                                  np.zeros(4, np.int32), 0, 4, out_p, out_j, 0)
+                                  np.zeros(4, np.int32), 0, 4, out_p, out_j, 0, 4)
 
     assert run(np.zeros((1, 8), np.float32)) == -1
     assert (out_j == SENTINEL_ROW).all() and (out_p == SENTINEL_P).all()
@@ -760,8 +772,8 @@ for _ in range(300):
     k = scalar_run(recs, recs.view(np.int64), rows, v0, v1, light, *want, 3)
     for kernel in KERNELS.values():
         got = (np.full(n + 8, -7, np.int32), np.full(n + 8, -1.0))
-        assert kernel(recs, rows, v0, v1, light, *got, 3) == k
-        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert kernel(recs, rows, v0, v1, light, *got, 3, n + 8) == k
+        assert np.array_equal(got[0][:k], want[0][:k]) and np.array_equal(got[1][:k], want[1][:k])
 n_l = 40
 hot = np.zeros((n_l, 8))
 hot[:, :3] = rng.uniform(-20, 20, (n_l, 3))
@@ -778,8 +790,8 @@ for o in range(n):
     k = scalar_candidates(recs, o, hot, lf, compete, c_j, 0, n_l, *want, 0)
     for kernel in CANDIDATES.values():
         got = (np.zeros(n_l), np.zeros(n_l, np.int32))
-        assert kernel(recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0) == k
-        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert kernel(recs, o, hot, lf, compete, c_j, 0, n_l, *got, 0, n_l) == k
+        assert np.array_equal(got[0][:k], want[0][:k]) and np.array_equal(got[1][:k], want[1][:k])
 from test_simd import check_stream
 check_stream(np.random.default_rng(11), 600, 40)
 from test_simd import HELD, HELD_KINDS, check_held, held_case
