@@ -43,8 +43,9 @@ Packing the lanes (_compress_store, the one primitive here with a version per ta
 chosen by PACKING from the features numba compiles for): with AVX-512 (avx512f and
 avx512vl) vcompress packs them in a register; with AVX2 a table indexed by the lane mask
 gives a vpermps permutation (the standard left-pack; 64-bit lanes in two halves of four);
-both then store the first lanes with a masked store. Elsewhere each lane is stored, without
-a branch, either to its place or to a scratch slot. (LLVM's portable
+both then store the whole register where the caller's room holds eight more entries
+(_store_lanes), and the first lanes with a masked store only at the room's end. Elsewhere
+each lane is stored, without a branch, either to its place or to a scratch slot. (LLVM's portable
 ``llvm.masked.compressstore`` expands to a branch a lane on every target without a
 compress instruction.) AVX-512's compress straight to memory is avoided, and so are
 gathers of the candidates' fields. With the range test alone in vector code (the pairs'
