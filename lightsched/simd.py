@@ -45,8 +45,8 @@ avx512vl) vcompress packs them in a register; with AVX2 a table indexed by the l
 gives a vpermps permutation (the standard left-pack; 64-bit lanes in two halves of four);
 both then store the whole register where the caller's room holds eight more entries
 (_store_lanes), and the first lanes with a masked store only at the room's end. Elsewhere
-each lane is stored, without a branch, either to its place or to a scratch slot. (LLVM's portable
-``llvm.masked.compressstore`` expands to a branch a lane on every target without a
+each lane is stored, without a branch, either to its place or to a scratch slot. (LLVM's
+portable ``llvm.masked.compressstore`` expands to a branch a lane on every target without a
 compress instruction.) AVX-512's compress straight to memory is avoided, and so are
 gathers of the candidates' fields. With the range test alone in vector code (the pairs'
 rest cut out), the light pass at (100k, 10k) took 9.0 ms one-thread scalar, 20.2 with
@@ -1337,5 +1337,5 @@ def prefetch_row(typingctx, table, row):
 
 
 __all__ = ["FORCED_TARGETS", "LANES", "PACKING", "PACKINGS", "candidate_run", "held_row",
-           "point_priority", "point_run", "prefetch_row", "spot_priority", "stream_fill", "stream_pack",
-           "stream_run", "stream_spots", "target_features"]
+           "point_priority", "point_run", "prefetch_row", "spot_priority", "stream_fill",
+           "stream_pack", "stream_run", "stream_spots", "target_features"]
