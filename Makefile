@@ -30,7 +30,10 @@ test: $(STAMP) lint
 test-quick: $(STAMP) lint
 	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow" --durations=10
 
+# The viewer's origin under either name of this machine may call the service (a page of
+# localhost:8080 calling 127.0.0.1:8080 is cross-origin).
 run: $(STAMP)
+	LIGHTSCHED_CORS_ORIGINS=$${LIGHTSCHED_CORS_ORIGINS-http://127.0.0.1:8080,http://localhost:8080} \
 	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
 
 # Every benchmark, each writing its section of bench/RESULTS.md and its plots.

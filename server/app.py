@@ -10,6 +10,8 @@ The two hot routes, ``POST /v1/sessions/{sid}/frames`` and the stream, are FastA
 (for /docs and OpenAPI) whose endpoints App.__call__ also calls directly: a frame skips
 FastAPI's middleware stack, router and dependency solving (~100 us of Python per request),
 and App does what those would do for it (problem documents, the 500, request metrics).
+With CORS on, a frame request that carries an Origin (a page's) takes the whole stack, for
+the CORS middleware's headers.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import PlainTextResponse, Response
 from lightsched_client.wire import (
@@ -45,13 +48,48 @@ BODY_TYPES = {"content": {MSGPACK: {}, JSON: {}}}
 
 
 def negotiate(accept: str | None, fallback: str | None) -> str:
-    """The response encoding: the first of msgpack / JSON that Accept names, else the
-    request's encoding, else JSON."""
-    for part in (accept or "").split(","):
-        kind = media_type(part)
-        if kind:
-            return kind
-    return fallback or JSON
+    """The response encoding from Accept (RFC 9110 12.5.1): of msgpack and JSON, the one
+    with the highest q (a type's q is that of the most specific range naming it:
+    ``application/msgpack`` over ``application/*`` over ``*/*``; q=0 refuses it); on a tie
+    the one named first, or, if only wildcards name them, the request's encoding, else JSON.
+    When Accept names neither, or refuses both, the answer is the request's encoding, else
+    JSON (the other one when only that one is refused): a client that cannot read it will
+    say so better than a 406 would."""
+    if not accept:
+        return fallback or JSON
+    if "," not in accept and ";" not in accept:  # the usual one-type header
+        return media_type(accept) or fallback or JSON
+    default = fallback or JSON
+    # Per type: (specificity, q, position) of the range that decides it.
+    best: dict[str, tuple[int, float, int]] = {}
+    for pos, part in enumerate(accept.split(",")):
+        name, *params = part.split(";")
+        name = name.strip().lower()
+        q = 1.0
+        for param in params:
+            key, _, value = param.partition("=")
+            if key.strip().lower() == "q":
+                try:
+                    q = min(max(float(value), 0.0), 1.0)
+                except ValueError:
+                    q = 0.0
+        kind = media_type(name)
+        if kind is not None:
+            ranges = [(kind, 2)]
+        elif name in ("*/*", "application/*"):
+            ranges = [(k, 0 if name == "*/*" else 1) for k in (MSGPACK, JSON)]
+        else:
+            continue
+        for k, specificity in ranges:
+            if k not in best or specificity > best[k][0]:
+                # A wildcard's position does not rank: only the type it defaults to does.
+                best[k] = (specificity, q, pos if specificity == 2 else 1 << 30)
+    ranked = sorted(((-q, position, k != default, k) for k, (_, q, position) in best.items()
+                     if q > 0))
+    if ranked:
+        return ranked[0][3]
+    other = JSON if default == MSGPACK else MSGPACK
+    return other if default in best and other not in best else default
 
 
 def key_of(headers: Any, settings: Settings) -> str | None:
@@ -74,6 +112,30 @@ _FRAMES = re.compile(r"/v1/sessions/([^/]+)/frames")
 _STREAM = re.compile(r"/v1/sessions/([^/]+)/stream")
 
 
+def _has_origin(scope: dict[str, Any]) -> bool:
+    return any(name == b"origin" for name, _ in scope["headers"])
+
+
+def origin_allowed(origin: str | None, headers: Any, scheme: str,
+                   settings: Settings) -> bool:
+    """Whether a WebSocket handshake may proceed: browsers send Origin and do not apply
+    the same-origin policy to WebSockets, so a page of another site could otherwise open
+    a stream of a service that has no keys (cross-site WebSocket hijacking). Programs send
+    no Origin; a page of the service's own origin, or of one in cors_origins, may."""
+    if origin is None:
+        return True
+    origin = origin.rstrip("/")
+    own = f"{'https' if scheme == 'wss' else 'http'}://{headers.get('host', '')}"
+    return origin == own or "*" in settings.cors_origins or origin in settings.cors_origins
+
+
+def server_timing(t0: float, t1: float, t2: float, t3: float) -> str:
+    """Where the server's time went (read and decode, compute, encode), for clients and
+    bench/service.py to split a round trip."""
+    return (f"decode;dur={(t1 - t0) * 1e3:.3f}, frame;dur={(t2 - t1) * 1e3:.3f}, "
+            f"encode;dur={(t3 - t2) * 1e3:.3f}")
+
+
 def _route_path(scope: dict[str, Any]) -> str:
     """The path the router matches (Starlette's get_route_path: without the root path)."""
     path: str = scope["path"]
@@ -91,10 +153,12 @@ class App(FastAPI):
     hot_stream: Callable[[WebSocket, str], Awaitable[None]] | None = None
     on_problem: Callable[[Request, Problem], Response] | None = None
     metrics: Any = None
+    cors: bool = False
 
     async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
         kind = scope["type"]
-        if kind == "http" and scope["method"] == "POST" and self.hot_frame is not None:
+        if kind == "http" and scope["method"] == "POST" and self.hot_frame is not None and not (
+                self.cors and _has_origin(scope)):  # a page's request: the CORS middleware
             m = _FRAMES.fullmatch(_route_path(scope))
             if m is not None:
                 await self._frame(scope, receive, send, m.group(1))
@@ -175,7 +239,27 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
             raise Problem(400, "malformed", "Malformed body", e.message,
                           pointer=e.pointer) from None
 
+    async def answer(request: Request, compute: Callable[[Any], Awaitable[Any]]) -> Response:
+        """The body decoded, computed and encoded, with a Server-Timing header."""
+        t0 = time.perf_counter()
+        doc = await read_doc(request)
+        t1 = time.perf_counter()
+        result = await compute(doc)
+        t2 = time.perf_counter()
+        response = reply(request, result)
+        response.headers["Server-Timing"] = server_timing(t0, t1, t2, time.perf_counter())
+        return response
+
     app.add_middleware(Observe, metrics=service.metrics)
+    if cfg.cors_origins:
+        # Keys travel in Authorization, not cookies: no credentials mode. A preflight may
+        # be cached for 10 minutes.
+        app.add_middleware(CORSMiddleware, allow_origins=list(cfg.cors_origins),
+                           allow_methods=["GET", "POST", "DELETE"],
+                           allow_headers=["Authorization", "Content-Type", "Accept"],
+                           expose_headers=["Server-Timing", "Location", "Retry-After",
+                                           "WWW-Authenticate"], max_age=600)
+        app.cors = True
 
     @app.exception_handler(Problem)
     async def on_problem(request: Request, p: Problem) -> Response:
@@ -203,7 +287,7 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
     async def schedule(request: Request) -> Response:
         """The stateless one-frame call (lightsched.schedule): every set on at weight 1."""
         key_of(request.headers, cfg)
-        return reply(request, await service.schedule(await read_doc(request)))
+        return await answer(request, service.schedule)
 
     @app.post("/v1/sessions", tags=["sessions"], status_code=201,
               openapi_extra=_body("session_request"), responses=_answers("session", 201))
@@ -233,27 +317,30 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         nothing), then one frame; the arrays asked for, or only the changed rows."""
         key = key_of(request.headers, cfg)
         service.session(sid, key)
-        t0 = time.perf_counter()
-        doc = await read_doc(request)
-        t1 = time.perf_counter()
-        answer = await service.frame(sid, key, doc)
-        t2 = time.perf_counter()
-        response = reply(request, answer)
-        t3 = time.perf_counter()
-        # Where the server's time went (read and decode, frame, encode), for clients and
-        # bench/service.py to split a round trip.
-        response.headers["Server-Timing"] = (f"decode;dur={(t1 - t0) * 1e3:.3f}, "
-                                             f"frame;dur={(t2 - t1) * 1e3:.3f}, "
-                                             f"encode;dur={(t3 - t2) * 1e3:.3f}")
-        return response
+        return await answer(request, lambda doc: service.frame(sid, key, doc))
+
+    @app.post("/v1/sessions/{sid}/tickets", tags=["sessions"], status_code=201,
+              responses=_answers("ticket", 201))
+    async def ticket(request: Request, sid: str) -> Response:
+        """A one-use ticket that opens this session's stream without the key
+        (``.../stream?ticket=<ticket>``), for browsers: a page's WebSocket cannot send an
+        Authorization header. It expires after ``expires_in`` seconds."""
+        return reply(request, service.issue_ticket(sid, key_of(request.headers, cfg)), 201)
 
     @app.websocket(STREAM_ROUTE)
     async def stream(ws: WebSocket, sid: str) -> None:
         """One frame request per message (binary: msgpack, text: JSON), one frame or problem
-        document back per message, in order."""
+        document back per message, in order. The key comes in Authorization or as a ticket
+        (``?ticket=``, from POST .../tickets)."""
         await ws.accept()
         try:
-            key = key_of(ws.headers, cfg)
+            if not origin_allowed(ws.headers.get("origin"), ws.headers, ws.url.scheme, cfg):
+                raise Problem(403, "forbidden-origin", "Origin not allowed",
+                              f"pages of {ws.headers.get('origin')} may not open streams; "
+                              "the service's cors_origins list the origins that may")
+            ticket = ws.query_params.get("ticket")
+            key = (service.redeem_ticket(sid, ticket) if ticket is not None
+                   else key_of(ws.headers, cfg))
             service.session(sid, key)
         except Problem as p:
             await ws.send_bytes(dumps(p.document(ws.url.path), MSGPACK))
@@ -382,13 +469,17 @@ def serve(host: str = "127.0.0.1", port: int = 8080, demo: bool = True,
 
 
 def uvicorn_options(settings: Settings, log_level: str = "warning") -> dict[str, Any]:
-    """uvicorn settings the service relies on: the C HTTP parser and event loop, messages
-    as large as bodies, and no permessage-deflate (arrays barely compress, and deflating a
-    frame costs more than sending it). The access log is on only where its lines are
+    """uvicorn settings the service relies on: the C HTTP parser and event loop, stream
+    messages up to twice the body limit (so that one somewhat over it is read whole and
+    answered with a 413 problem document: a limit in the WebSocket layer closes the
+    connection while the client is still sending, which the client sees as 1006), and no
+    permessage-deflate (arrays barely compress, and deflating a frame costs more than
+    sending it). The access log is on only where its lines are
     printed (log level info or below): uvicorn formats a line's arguments before the
     logger drops it, a few microseconds per request."""
-    return {"http": "httptools", "loop": "uvloop", "ws_max_size": settings.max_body_bytes,
-            "ws_per_message_deflate": False, "log_level": log_level,
+    return {"http": "httptools", "loop": "uvloop",
+            "ws_max_size": 2 * settings.max_body_bytes + 4096, "ws_per_message_deflate": False,
+            "log_level": log_level,
             "access_log": log_level.lower() in ("trace", "debug", "info")}
 
 

@@ -24,8 +24,12 @@ WIRE_ARRAY_SCHEMA = {
              "dtype": {"enum": ["bool", "int8", "uint8", "int16", "uint16", "int32", "uint32",
                                 "int64", "uint64", "float32", "float64"]},
              "shape": {"type": "array", "items": {"type": "integer", "minimum": 0}},
-             "data": {"description": "bytes (msgpack bin) or base64 (JSON)",
-                      "type": "string"}}},
+             # JSON Schema has no bytes type: a msgpack bin is not a string, so data is
+             # left untyped here and the encodings are named in x-msgpack / x-json.
+             "data": {"description": "the raw bytes: a msgpack bin, or in JSON standard "
+                                     "base64 text with padding",
+                      "x-msgpack": "bin", "x-json": {"type": "string",
+                                                     "contentEncoding": "base64"}}}},
         {"type": "array"},
     ],
 }
@@ -140,6 +144,14 @@ class SessionInfo(BaseModel):
     idle_seconds: float
 
 
+class Ticket(BaseModel):
+    """POST /v1/sessions/{id}/tickets: a one-use ticket that opens the session's stream
+    (``/v1/sessions/{id}/stream?ticket=<ticket>``) without the key, for browsers."""
+
+    ticket: str
+    expires_in: float = Field(description="seconds the ticket stays redeemable")
+
+
 class _FrameHead(BaseModel):
     frame_index: int
     changed_only: bool = False
@@ -179,5 +191,5 @@ SCHEMAS: dict[str, type[BaseModel]] = {
     "config": ConfigModel, "camera": CameraModel, "change": Change,
     "frame_request": FrameRequest, "schedule_request": ScheduleRequest,
     "session_request": SessionRequest, "session": SessionInfo, "frame": FrameResponse,
-    "problem": ProblemModel,
+    "problem": ProblemModel, "ticket": Ticket,
 }

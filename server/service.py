@@ -132,6 +132,8 @@ class Service:
         self.sessions: dict[str, Session] = {}
         self.metrics = Metrics()
         self._swept = -float("inf")
+        # Stream tickets: ticket -> (session id, owner key, expiry on time.monotonic()).
+        self.tickets: dict[str, tuple[str, str | None, float]] = {}
 
     # ------------------------------------------------------------------ sessions
     def _idle(self, s: Session, now: float) -> bool:
@@ -174,6 +176,34 @@ class Service:
     def delete_session(self, sid: str, owner: str | None) -> None:
         self.session(sid, owner)
         del self.sessions[sid]
+
+    # ------------------------------------------------------------------ stream tickets
+    def issue_ticket(self, sid: str, owner: str | None) -> dict[str, Any]:
+        """A one-use ticket that opens the session's stream without the key, for browsers
+        (whose WebSocket cannot carry an Authorization header); it is redeemable for
+        ticket_ttl seconds. A session holds at most max_pending_frames + 8 live tickets (429
+        above), so a leaked key cannot fill the service's memory with them."""
+        self.session(sid, owner)
+        now = time.monotonic()
+        self.tickets = {t: v for t, v in self.tickets.items() if v[2] > now}
+        live = sum(1 for v in self.tickets.values() if v[0] == sid)
+        if live >= self.settings.max_pending_frames + 8:
+            raise Problem(429, "too-many-tickets", "Too many tickets",
+                          f"session {sid!r} already has {live} unused tickets",
+                          headers={"Retry-After": str(int(self.settings.ticket_ttl) + 1)})
+        ticket = secrets.token_urlsafe(24)
+        self.tickets[ticket] = (sid, owner, now + self.settings.ticket_ttl)
+        return {"ticket": ticket, "expires_in": self.settings.ticket_ttl}
+
+    def redeem_ticket(self, sid: str, ticket: str) -> str | None:
+        """The owner key a ticket stands for, once: 401 if it is unknown, used, expired or
+        another session's."""
+        entry = self.tickets.pop(ticket, None)
+        if entry is None or entry[0] != sid or entry[2] <= time.monotonic():
+            raise Problem(401, "unauthorized", "Unauthorized",
+                          "the ticket is unknown, used, expired or for another session; "
+                          "get a new one with POST /v1/sessions/{id}/tickets")
+        return entry[1]
 
     # ------------------------------------------------------------------ frames
     async def frame(self, sid: str, owner: str | None, doc: Any) -> dict[str, Any]:

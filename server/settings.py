@@ -16,7 +16,11 @@ class Settings:
     per frame; 0 picks one thread below small_scene objects (waking a second core costs a
     small frame more in latency tails than it saves, and sessions run side by side anyway)
     and every thread above. api_keys: when set, every /v1 call needs
-    ``Authorization: Bearer <key>``."""
+    ``Authorization: Bearer <key>``. cors_origins: the web origins (``scheme://host[:port]``,
+    or ``*`` for any) whose pages may call the service (CORS) and open its streams; none by
+    default, and a page of the service's own origin always may. ticket_ttl: seconds a stream
+    ticket (POST /v1/sessions/{id}/tickets, for browsers, which cannot send a key on a
+    WebSocket) stays redeemable."""
 
     max_body_bytes: int = 64 * 1024 * 1024
     max_lights: int = 1_000_000
@@ -27,21 +31,27 @@ class Settings:
     frame_threads: int = 0
     small_scene: int = 4096
     api_keys: frozenset[str] | None = field(default=None)
+    cors_origins: tuple[str, ...] = ()
+    ticket_ttl: float = 30.0
 
     @classmethod
     def from_env(cls, **overrides: object) -> Settings:
         """LIGHTSCHED_MAX_BODY_BYTES, _MAX_LIGHTS, _MAX_OBJECTS, _MAX_SESSIONS,
-        _SESSION_TTL, _MAX_PENDING_FRAMES; keys from LIGHTSCHED_API_KEYS (comma-separated)
-        and/or LIGHTSCHED_API_KEYS_FILE (one key per line, # comments)."""
+        _SESSION_TTL, _MAX_PENDING_FRAMES, _FRAME_THREADS, _SMALL_SCENE, _TICKET_TTL;
+        LIGHTSCHED_CORS_ORIGINS (comma-separated); keys from LIGHTSCHED_API_KEYS
+        (comma-separated) and/or LIGHTSCHED_API_KEYS_FILE (one key per line, # comments)."""
         env = os.environ
         kw: dict[str, object] = {}
         for name, conv in (("max_body_bytes", int), ("max_lights", int), ("max_objects", int),
                            ("max_sessions", int), ("session_ttl", float),
                            ("max_pending_frames", int), ("frame_threads", int),
-                           ("small_scene", int)):
+                           ("small_scene", int), ("ticket_ttl", float)):
             raw = env.get("LIGHTSCHED_" + name.upper())
             if raw:
                 kw[name] = conv(raw)
+        origins = [o.strip().rstrip("/") for o in env.get("LIGHTSCHED_CORS_ORIGINS", "").split(",")]
+        if any(origins):
+            kw["cors_origins"] = tuple(o for o in origins if o)
         keys = {k.strip() for k in env.get("LIGHTSCHED_API_KEYS", "").split(",") if k.strip()}
         path = env.get("LIGHTSCHED_API_KEYS_FILE")
         if path:

@@ -78,8 +78,10 @@ class _NotFast(Exception):
 def _array_hook(doc: dict[str, Any]) -> Any:
     """msgpack's ``object_hook``: a well-formed array map into its (read-only) array, as
     decode_array makes it; anything else about an array map raises _NotFast."""
-    if len(doc) != 3 or "data" not in doc or "dtype" not in doc or "shape" not in doc:
+    if "dtype" not in doc:
         return doc
+    if len(doc) != 3 or "data" not in doc or "shape" not in doc:
+        raise _NotFast
     dtype, shape, data = doc["dtype"], doc["shape"], doc["data"]
     if type(dtype) is not str or type(shape) is not list or type(data) is not bytes:
         raise _NotFast
@@ -97,10 +99,14 @@ def _array_hook(doc: dict[str, Any]) -> Any:
 
 
 def is_array_doc(value: Any) -> bool:
-    return isinstance(value, dict) and value.keys() == ARRAY_KEYS
+    """A map with a ``dtype`` key is an array map (no other map of the wire has one)."""
+    return isinstance(value, dict) and "dtype" in value
 
 
 def decode_array(doc: dict[str, Any], pointer: str) -> np.ndarray:
+    if doc.keys() != ARRAY_KEYS:
+        raise WireError(pointer, "an array map has exactly the keys dtype, shape and data; "
+                        f"this one has {', '.join(map(str, doc))}")
     dtype, shape, data = doc["dtype"], doc["shape"], doc["data"]
     if dtype not in DTYPES:
         raise WireError(pointer + "/dtype", f"unknown dtype {dtype!r}; one of {', '.join(DTYPES)}")
