@@ -1,7 +1,8 @@
 """schemas/: the JSON Schema of every request and response (from models.py), the frame's
 field list (frame_fields.json, from lightsched.fields; the Python client ships a copy) and
 the golden examples, request/response pairs in both encodings that the server's and every
-client's tests replay byte for byte.
+client's tests replay byte for byte, and the conformance scenarios every client runs
+(conformance.py).
 
     python -m lightsched_server.schemas          # rewrite schemas/ and the client's copy
     python -m lightsched_server.schemas --check  # exit 1 if the committed files drifted
@@ -22,6 +23,7 @@ from lightsched_client.wire import JSON, MSGPACK, dumps, loads
 import lightsched as ls
 from lightsched.fields import fields_json
 
+from .conformance import conformance_files
 from .models import SCHEMAS
 
 REPO = Path(__file__).resolve().parent.parent
@@ -153,7 +155,7 @@ def all_files() -> dict[str, bytes]:
     server = ServerThread()
     try:
         return {**schema_files(), "frame_fields.json": fields_json().encode(),
-                **example_files(http_send(server.url))}
+                **example_files(http_send(server.url)), **conformance_files()}
     finally:
         server.stop()
 

@@ -367,13 +367,21 @@ class RemoteScheduler(_Session):
             self._ws = self._stack.enter_context(
                 connect(_ws_url(self.client.url, self.id), additional_headers=self._ws_headers(),
                         max_size=None, compression=None))
+        ws = self._ws
         try:
-            self._ws.send(dumps(doc, MSGPACK))
-            raw = self._ws.recv()
+            ws.send(dumps(doc, MSGPACK))
+            raw = ws.recv()
         except ConnectionClosed as e:
+            # A refused handshake sends its problem message, then closes: that message
+            # is still buffered when the send finds the stream closed.
+            try:
+                raw = ws.recv(timeout=0)
+            except (ConnectionClosed, TimeoutError):
+                raw = None
             self._stack.close()
             self._ws = None
-            raise _closed(e) from None
+            if raw is None:
+                raise _closed(e) from None
         return _stream_answer(raw)
 
     def info(self) -> dict[str, Any]:
@@ -446,12 +454,18 @@ class AsyncRemoteScheduler(_Session):
             self._ws = await connect(_ws_url(self.client.url, self.id),
                                      additional_headers=self._ws_headers(), max_size=None,
                                      compression=None)
+        ws = self._ws
         try:
-            await self._ws.send(dumps(doc, MSGPACK))
-            raw = await self._ws.recv()
+            await ws.send(dumps(doc, MSGPACK))
+            raw = await ws.recv()
         except ConnectionClosed as e:
+            try:  # the refused handshake's problem message, as in RemoteScheduler
+                raw = await asyncio.wait_for(ws.recv(), 0.001)
+            except (ConnectionClosed, TimeoutError):
+                raw = None
             self._ws = None
-            raise _closed(e) from None
+            if raw is None:
+                raise _closed(e) from None
         return _stream_answer(raw)
 
     async def close(self, delete: bool = True) -> None:
