@@ -5,7 +5,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-quick run lint bench bench-quick clean
+TS := clients/typescript
+TS_STAMP := $(TS)/node_modules/.installed
+
+.PHONY: test test-quick test-ts run lint bench bench-quick clean
 
 # The root distribution ships lightsched_client too (the server's wire codec): a venv made
 # before it did has the client's own distribution as well, which is dropped so that only one
@@ -22,6 +25,16 @@ lint: $(STAMP)
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -n 2 -q --durations=15
+	$(MAKE) test-ts
+
+# The TypeScript client (node 20+ and npm): its golden replay, the conformance suite and
+# its service tests, against a `lightsched serve` the tests start from .venv.
+$(TS_STAMP): $(TS)/package-lock.json
+	cd $(TS) && npm ci --no-audit --no-fund
+	touch $(TS_STAMP)
+
+test-ts: $(STAMP) $(TS_STAMP)
+	cd $(TS) && npm test
 
 # ~3 minutes on 2 cores with numba's cache warm (the full suite takes ~20): a tenth of the
 # hypothesis examples, and without the tests marked slow (those that compile or warm up
@@ -45,4 +58,4 @@ bench-quick: $(STAMP)
 	$(BIN)/python bench/run_all.py --quick
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info $(TS)/node_modules $(TS)/dist

@@ -44,10 +44,42 @@ def schema_files() -> dict[str, bytes]:
     return out
 
 
+TS_FIELDS = REPO / "clients" / "typescript" / "src" / "fields.ts"
+# The typed array a TypeScript frame holds per dtype (wire.ts's ARRAY_OF).
+TS_ARRAYS = {"bool": "Uint8Array", "int8": "Int8Array", "uint8": "Uint8Array",
+             "int16": "Int16Array", "uint16": "Uint16Array", "int32": "Int32Array",
+             "uint32": "Uint32Array", "int64": "BigInt64Array", "uint64": "BigUint64Array",
+             "float32": "Float32Array", "float64": "Float64Array"}
+
+
+def fields_ts() -> str:
+    """The field list as a TypeScript module for the TypeScript client: the list, and
+    the frame's arrays as typed properties."""
+    from lightsched.fields import FIELDS
+
+    docs = [f.document() for f in FIELDS]
+    rows = ",\n".join("  " + json.dumps(d) for d in docs)
+    props = "\n".join(
+        f"  /** {d['description']} ({d['dtype']} [{', '.join(d['shape'])}]) */\n"
+        f"  {d['name']}?: NdArray<{TS_ARRAYS[d['dtype']]}>;" for d in docs)
+    return ("// Generated from lightsched/fields.py by python -m lightsched_server.schemas; do "
+            "not edit.\n// DESIGN section 3's frame arrays, in its order (schemas/"
+            "frame_fields.json).\n\nimport type { DType, NdArray } from \"./wire.js\";\n\n"
+            "export interface FrameField {\n  name: FieldName;\n  dtype: DType;\n"
+            "  shape: string[];\n  per_object: boolean;\n  empty: number | boolean | null;\n"
+            "  description: string;\n}\n\n"
+            f"export const FRAME_FIELDS: readonly FrameField[] = [\n{rows},\n];\n\n"
+            "export type FieldName =\n"
+            + "\n".join(f"  | {json.dumps(d['name'])}" for d in docs) + ";\n\n"
+            "/** The arrays of a frame; those not asked for (outputs) are absent. */\n"
+            f"export interface FrameArrays {{\n{props}\n}}\n")
+
+
 def field_files() -> dict[Path, bytes]:
-    """schemas/frame_fields.json and the client package's copy (no server needed)."""
+    """schemas/frame_fields.json, the Python client package's copy and the TypeScript
+    client's module (no server needed)."""
     data = fields_json().encode()
-    return {ROOT / "frame_fields.json": data, CLIENT_FIELDS: data}
+    return {ROOT / "frame_fields.json": data, CLIENT_FIELDS: data, TS_FIELDS: fields_ts().encode()}
 
 
 # The golden scene: a point light, a shadowed spot, a shadowed sun; four boxes; one camera.
