@@ -8,7 +8,13 @@ STAMP := $(VENV)/.installed
 TS := clients/typescript
 TS_STAMP := $(TS)/node_modules/.installed
 
-.PHONY: test test-quick test-ts run lint bench bench-quick clean
+CPP := clients/cpp
+CPP_BUILD := build/cpp
+# Debian's packages the C++ client builds with.
+CPP_DEBS := libmsgpack-cxx-dev libcpp-httplib-dev nlohmann-json3-dev pkg-config
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: test test-quick test-ts test-cpp cpp-deps run lint bench bench-quick clean
 
 # The root distribution ships lightsched_client too (the server's wire codec): a venv made
 # before it did has the client's own distribution as well, which is dropped so that only one
@@ -26,6 +32,7 @@ lint: $(STAMP)
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -n 2 -q --durations=15
 	$(MAKE) test-ts
+	$(MAKE) test-cpp
 
 # The TypeScript client (node 20+ and npm): its golden replay, the conformance suite and
 # its service tests, against a `lightsched serve` the tests start from .venv.
@@ -35,6 +42,17 @@ $(TS_STAMP): $(TS)/package-lock.json
 
 test-ts: $(STAMP) $(TS_STAMP)
 	cd $(TS) && npm test
+
+# The C++ client (C++17, CMake): its golden replay, the conformance suite and a live round
+# trip, each against a `lightsched serve` the test starts from .venv.
+cpp-deps:
+	@dpkg -s $(CPP_DEBS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $(CPP_DEBS); }
+
+test-cpp: $(STAMP) cpp-deps
+	cmake -S $(CPP) -B $(CPP_BUILD) -DCMAKE_BUILD_TYPE=Release
+	cmake --build $(CPP_BUILD) -j2
+	ctest --test-dir $(CPP_BUILD) --output-on-failure
 
 # ~3 minutes on 2 cores with numba's cache warm (the full suite takes ~20): a tenth of the
 # hypothesis examples, and without the tests marked slow (those that compile or warm up
@@ -58,4 +76,4 @@ bench-quick: $(STAMP)
 	$(BIN)/python bench/run_all.py --quick
 
 clean:
-	rm -rf $(VENV) build *.egg-info $(TS)/node_modules $(TS)/dist
+	rm -rf $(VENV) build *.egg-info $(TS)/node_modules $(TS)/dist $(CPP_BUILD)

@@ -75,11 +75,36 @@ def fields_ts() -> str:
             f"export interface FrameArrays {{\n{props}\n}}\n")
 
 
+CPP_FIELDS = REPO / "clients" / "cpp" / "include" / "lightsched" / "fields.hpp"
+
+
+def fields_cpp() -> str:
+    """The field list as a C++17 header for the C++ client."""
+    from lightsched.fields import FIELDS
+
+    def empty(value: object) -> str:
+        assert value is None or float(value) == int(value), "the header's empty is an int"
+        return "0" if value is None else str(int(value))
+
+    rows = ",\n".join(
+        f"    {{\"{f.name}\", \"{np.dtype(f.dtype).name}\", {int(len(f.shape))}, "
+        f"{'true' if f.per_object else 'false'}, {empty(f.empty)}}}" for f in FIELDS)
+    return ("// Generated from lightsched/fields.py by python -m lightsched_server.schemas; do "
+            "not edit.\n// DESIGN section 3's frame arrays, in its order (schemas/"
+            "frame_fields.json).\n#pragma once\n\n#include <array>\n\nnamespace lightsched {\n\n"
+            "struct FrameField {\n  const char* name;\n  const char* dtype;\n"
+            "  int ndim;\n  bool per_object;  // sent by rows with changed_only\n"
+            "  int empty;  // a per-object row's value when the object has nothing\n};\n\n"
+            f"inline constexpr std::array<FrameField, {len(FIELDS)}> FRAME_FIELDS{{{{\n{rows},\n}}}};"
+            "\n\n}  // namespace lightsched\n")
+
+
 def field_files() -> dict[Path, bytes]:
-    """schemas/frame_fields.json, the Python client package's copy and the TypeScript
-    client's module (no server needed)."""
+    """schemas/frame_fields.json, the Python client package's copy, the TypeScript
+    client's module and the C++ client's header (no server needed)."""
     data = fields_json().encode()
-    return {ROOT / "frame_fields.json": data, CLIENT_FIELDS: data, TS_FIELDS: fields_ts().encode()}
+    return {ROOT / "frame_fields.json": data, CLIENT_FIELDS: data, TS_FIELDS: fields_ts().encode(),
+            CPP_FIELDS: fields_cpp().encode()}
 
 
 # The golden scene: a point light, a shadowed spot, a shadowed sun; four boxes; one camera.

@@ -53,7 +53,7 @@ def test_frame_field_files_match_lightsched_fields():
 
     for path, data in schemas.field_files().items():
         assert path.exists(), f"{path} is missing"
-        want = schemas.fields_ts() if path.suffix == ".ts" else fields_json()
+        want = {".ts": schemas.fields_ts, ".hpp": schemas.fields_cpp}.get(path.suffix, fields_json)()
         assert path.read_text("utf-8") == data.decode() == want, \
             f"{path} drifted from lightsched/fields.py"
     names = [f.name for f in FIELDS]

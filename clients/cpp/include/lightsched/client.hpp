@@ -1,0 +1,198 @@
+// The LightSched client for native engines (C++17): the embedded lightsched API over the
+// service's HTTP/msgpack wire (schemas/wire.md). A Client makes sessions and runs the
+// stateless schedule(); a Session holds scene changes until frame(), which sends them with
+// the frame. Frames come back as flat little-endian arrays an engine can upload as they are
+// (Array::data<T>()), changed_only answers merged into the session's last frame.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "lightsched/fields.hpp"
+
+namespace lightsched {
+
+// A numeric array: prod(shape) values of dtype, row-major, in `bytes` (16-byte aligned).
+struct Array {
+  std::string dtype;  // bool, int8, uint8, int16, uint16, int32, uint32, int64, uint64, float32, float64
+  std::vector<std::int64_t> shape;
+  std::vector<std::uint8_t> bytes;
+
+  std::size_t size() const;       // prod(shape)
+  std::size_t itemsize() const;   // bytes per value
+  std::size_t row_size() const;   // values per row (prod(shape[1:]))
+  template <class T> const T* data() const { return reinterpret_cast<const T*>(bytes.data()); }
+  template <class T> T* data() { return reinterpret_cast<T*>(bytes.data()); }
+
+  template <class T> static Array of(const std::string& dtype, const std::vector<std::int64_t>& shape,
+                                     const T* values) {
+    Array a{dtype, shape, {}};
+    a.bytes.resize(a.size() * sizeof(T));
+    if (!a.bytes.empty()) std::memcpy(a.bytes.data(), values, a.bytes.size());
+    return a;
+  }
+  static Array int32(const std::vector<std::int32_t>& v) { return of("int32", {std::int64_t(v.size())}, v.data()); }
+  static Array float64(const std::vector<double>& v) { return of("float64", {std::int64_t(v.size())}, v.data()); }
+  // n 3-vectors from 3n values (positions, directions, box corners).
+  static Array vectors(const std::vector<double>& v) { return of("float64", {std::int64_t(v.size() / 3), 3}, v.data()); }
+  static Array bools(const std::vector<std::uint8_t>& v) { return of("bool", {std::int64_t(v.size())}, v.data()); }
+};
+
+// The keyword arrays of a scene call (DESIGN section 7), by field name.
+using Fields = std::map<std::string, Array>;
+
+// A view (DESIGN section 1); without an id a camera takes its position in the list.
+struct Camera {
+  std::optional<std::int64_t> id;
+  double position[3];
+  double forward[3];
+  double up[3];
+  double fov_y;
+  double aspect;
+  double near_plane;
+  double far_plane;
+  double focus[2] = {0.0, 0.0};
+  double height_px = 1080.0;
+};
+
+// A frame (DESIGN section 3): the arrays asked for, by name, always whole.
+struct Frame {
+  std::int64_t frame_index = 0;
+  std::map<std::string, Array> arrays;
+  const Array* get(const std::string& name) const {
+    auto it = arrays.find(name);
+    return it == arrays.end() ? nullptr : &it->second;
+  }
+};
+
+struct FrameOptions {
+  double dt = 1.0 / 60.0;
+  bool cut = false;
+  std::vector<std::string> outputs;  // empty: all
+  bool changed_only = false;
+  bool stats = true;
+};
+
+// A config value (DESIGN section 1's Config fields): a number, a bool or a string.
+struct ConfigValue {
+  enum Kind { Int, Float, Bool, String } kind;
+  std::int64_t i = 0;
+  double f = 0.0;
+  bool b = false;
+  std::string s;
+  ConfigValue(int v) : kind(Int), i(v) {}
+  ConfigValue(std::int64_t v) : kind(Int), i(v) {}
+  ConfigValue(double v) : kind(Float), f(v) {}
+  ConfigValue(bool v) : kind(Bool), b(v) {}
+  ConfigValue(const char* v) : kind(String), s(v) {}
+  ConfigValue(std::string v) : kind(String), s(std::move(v)) {}
+};
+using Config = std::map<std::string, ConfigValue>;
+
+// The service refused a call: the problem document's status, type, field, index, pointer.
+class RemoteError : public std::runtime_error {
+ public:
+  RemoteError(int status, std::string type, std::string title, std::string detail,
+              std::optional<std::string> field, std::optional<std::int64_t> index,
+              std::optional<std::string> pointer);
+  int status;
+  std::string type, title, detail;
+  std::optional<std::string> field;
+  std::optional<std::int64_t> index;
+  std::optional<std::string> pointer;
+};
+
+// Bad input (422): field and index as lightsched.ValidationError names them.
+class ValidationError : public RemoteError {
+ public:
+  using RemoteError::RemoteError;
+};
+
+struct Change {
+  std::string op;
+  Fields fields;
+};
+
+// The full frame from a changed_only answer and the last full frame (wire.md).
+Frame merge_changed(const Frame* prev, const Frame& answer, const Array& rows, bool has_object_id);
+
+class Client;
+
+// A session: lightsched.Scheduler's calls, computed by the service.
+class Session {
+ public:
+  const std::string& id() const { return id_; }
+  std::int64_t frame_index() const { return frame_index_; }
+
+  void set_lights(Fields fields) { changes_.push_back({"set_lights", std::move(fields)}); }
+  void update_lights(Fields fields) { changes_.push_back({"update_lights", std::move(fields)}); }
+  void remove_lights(Array id) { changes_.push_back({"remove_lights", {{"id", std::move(id)}}}); }
+  void set_objects(Fields fields) { changes_.push_back({"set_objects", std::move(fields)}); }
+  void update_objects(Fields fields) { changes_.push_back({"update_objects", std::move(fields)}); }
+  void remove_objects(Array id) { changes_.push_back({"remove_objects", {{"id", std::move(id)}}}); }
+
+  // The held changes, then one frame (the changes are sent either way: a refused frame
+  // changes nothing in the session).
+  Frame frame(const std::vector<Camera>& cameras, const FrameOptions& options = {});
+  // frame_index, lights and objects of the session.
+  std::map<std::string, std::int64_t> info();
+  // Deletes the session.
+  void close();
+
+ private:
+  friend class Client;
+  Session(Client* client, std::string id, std::int64_t frame_index)
+      : client_(client), id_(std::move(id)), frame_index_(frame_index) {}
+  Client* client_;
+  std::string id_;
+  std::int64_t frame_index_;
+  std::vector<Change> changes_;
+  std::optional<Frame> last_;
+};
+
+class Client {
+ public:
+  // url: "http://host:port"; api_key: sent as "Authorization: Bearer <key>" when set.
+  explicit Client(const std::string& url, std::string api_key = "");
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  Session session(const Config& config = {});
+  // The stateless one-frame call (lightsched.schedule).
+  Frame schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
+                 const Config& config = {}, const std::vector<std::string>& outputs = {});
+  // One raw call: msgpack body in, (status, content type, body) out, no decoding.
+  struct Raw {
+    int status;
+    std::string content_type;
+    std::string body;
+  };
+  Raw raw(const std::string& method, const std::string& path, const std::string& body,
+          const std::string& content_type = "application/msgpack");
+
+ private:
+  friend class Session;
+  std::string call(const std::string& method, const std::string& path, const std::string& body);
+  struct Http;
+  std::unique_ptr<Http> http_;
+  std::string api_key_;
+};
+
+// The wire codec (exposed for the tests): a frame answer's bytes into a Frame (and, for
+// changed_only, its rows).
+struct Answer {
+  Frame frame;
+  bool changed_only = false;
+  bool has_object_id = false;
+  Array rows;
+};
+Answer decode_frame(const std::string& msgpack_bytes);
+
+}  // namespace lightsched

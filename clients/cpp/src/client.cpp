@@ -1,0 +1,407 @@
+// The C++ client: msgpack-cxx for the wire (schemas/wire.md), cpp-httplib for HTTP.
+#include "lightsched/client.hpp"
+
+#include <httplib.h>
+
+#include <algorithm>
+#include <msgpack.hpp>
+
+namespace lightsched {
+
+namespace {
+
+const std::map<std::string, std::size_t> ITEMSIZE = {
+    {"bool", 1},  {"int8", 1},  {"uint8", 1},  {"int16", 2},   {"uint16", 2},  {"int32", 4},
+    {"uint32", 4}, {"int64", 8}, {"uint64", 8}, {"float32", 4}, {"float64", 8}};
+
+
+using Packer = msgpack::packer<msgpack::sbuffer>;
+
+void pack_str(Packer& pk, const std::string& s) {
+  pk.pack_str(static_cast<std::uint32_t>(s.size()));
+  pk.pack_str_body(s.data(), static_cast<std::uint32_t>(s.size()));
+}
+
+void pack_array(Packer& pk, const Array& a) {
+  pk.pack_map(3);
+  pack_str(pk, "dtype");
+  pack_str(pk, a.dtype);
+  pack_str(pk, "shape");
+  pk.pack_array(static_cast<std::uint32_t>(a.shape.size()));
+  for (auto n : a.shape) pk.pack_int64(n);
+  pack_str(pk, "data");
+  pk.pack_bin(static_cast<std::uint32_t>(a.bytes.size()));
+  pk.pack_bin_body(reinterpret_cast<const char*>(a.bytes.data()), static_cast<std::uint32_t>(a.bytes.size()));
+}
+
+void pack_vector(Packer& pk, const double* v, std::int64_t n) {
+  pack_array(pk, Array::of("float64", {n}, v));
+}
+
+void pack_camera(Packer& pk, const Camera& c) {
+  pk.pack_map(c.id ? 10 : 9);
+  if (c.id) {
+    pack_str(pk, "id");
+    pk.pack_int64(*c.id);
+  }
+  pack_str(pk, "position");
+  pack_vector(pk, c.position, 3);
+  pack_str(pk, "forward");
+  pack_vector(pk, c.forward, 3);
+  pack_str(pk, "up");
+  pack_vector(pk, c.up, 3);
+  const std::pair<const char*, double> scalars[] = {
+      {"fov_y", c.fov_y}, {"aspect", c.aspect}, {"near", c.near_plane}, {"far", c.far_plane}};
+  for (const auto& [name, value] : scalars) {
+    pack_str(pk, name);
+    pk.pack_double(value);
+  }
+  pack_str(pk, "focus");
+  pack_vector(pk, c.focus, 2);
+  pack_str(pk, "height_px");
+  pk.pack_double(c.height_px);
+}
+
+void pack_cameras(Packer& pk, const std::vector<Camera>& cameras) {
+  pk.pack_array(static_cast<std::uint32_t>(cameras.size()));
+  for (const auto& c : cameras) pack_camera(pk, c);
+}
+
+void pack_fields(Packer& pk, const Fields& fields) {
+  pk.pack_map(static_cast<std::uint32_t>(fields.size()));
+  for (const auto& [name, a] : fields) {
+    pack_str(pk, name);
+    pack_array(pk, a);
+  }
+}
+
+void pack_config(Packer& pk, const Config& config) {
+  pk.pack_map(static_cast<std::uint32_t>(config.size()));
+  for (const auto& [name, v] : config) {
+    pack_str(pk, name);
+    switch (v.kind) {
+      case ConfigValue::Int: pk.pack_int64(v.i); break;
+      case ConfigValue::Float: pk.pack_double(v.f); break;
+      case ConfigValue::Bool: v.b ? pk.pack_true() : pk.pack_false(); break;
+      case ConfigValue::String: pack_str(pk, v.s); break;
+    }
+  }
+}
+
+void pack_outputs(Packer& pk, const std::vector<std::string>& outputs) {
+  pk.pack_array(static_cast<std::uint32_t>(outputs.size()));
+  for (const auto& o : outputs) pack_str(pk, o);
+}
+
+std::string key_of(const msgpack::object& o) {
+  if (o.type != msgpack::type::STR) throw std::runtime_error("malformed answer: a map key is not text");
+  return std::string(o.via.str.ptr, o.via.str.size);
+}
+
+const msgpack::object* find(const msgpack::object& map, const std::string& key) {
+  if (map.type != msgpack::type::MAP) return nullptr;
+  for (std::uint32_t i = 0; i < map.via.map.size; i++) {
+    const auto& kv = map.via.map.ptr[i];
+    if (kv.key.type == msgpack::type::STR && key_of(kv.key) == key) return &kv.val;
+  }
+  return nullptr;
+}
+
+std::int64_t as_int(const msgpack::object& o) {
+  if (o.type == msgpack::type::POSITIVE_INTEGER) return static_cast<std::int64_t>(o.via.u64);
+  if (o.type == msgpack::type::NEGATIVE_INTEGER) return o.via.i64;
+  throw std::runtime_error("malformed answer: an integer expected");
+}
+
+// An array map into an Array (a copy: msgpack bins are not aligned).
+Array decode_array(const msgpack::object& o) {
+  const auto* dtype = find(o, "dtype");
+  const auto* shape = find(o, "shape");
+  const auto* data = find(o, "data");
+  if (!dtype || !shape || !data || o.via.map.size != 3 || dtype->type != msgpack::type::STR ||
+      shape->type != msgpack::type::ARRAY || data->type != msgpack::type::BIN) {
+    throw std::runtime_error("malformed answer: a bad array map");
+  }
+  Array a;
+  a.dtype = key_of(*dtype);
+  for (std::uint32_t i = 0; i < shape->via.array.size; i++) a.shape.push_back(as_int(shape->via.array.ptr[i]));
+  if (data->via.bin.size != a.size() * a.itemsize()) throw std::runtime_error("malformed answer: array size");
+  a.bytes.assign(data->via.bin.ptr, data->via.bin.ptr + data->via.bin.size);
+  return a;
+}
+
+std::optional<std::string> opt_str(const msgpack::object& doc, const char* key) {
+  const auto* v = find(doc, key);
+  if (!v || v->type != msgpack::type::STR) return std::nullopt;
+  return key_of(*v);
+}
+
+[[noreturn]] void raise_problem(int status, const std::string& body) {
+  std::optional<std::string> type, title, detail, field, pointer;
+  std::optional<std::int64_t> index;
+  try {
+    auto handle = msgpack::unpack(body.data(), body.size());
+    const auto& doc = handle.get();
+    type = opt_str(doc, "type");
+    title = opt_str(doc, "title");
+    detail = opt_str(doc, "detail");
+    field = opt_str(doc, "field");
+    pointer = opt_str(doc, "pointer");
+    if (const auto* i = find(doc, "index"); i && i->type != msgpack::type::NIL) index = as_int(*i);
+    if (const auto* s = find(doc, "status"); s) status = static_cast<int>(as_int(*s));
+  } catch (const std::exception&) {
+    detail = body;  // not a problem document (a proxy's page, say)
+  }
+  if (status == 422) {
+    throw ValidationError(status, type.value_or(""), title.value_or(""), detail.value_or(""), field, index, pointer);
+  }
+  throw RemoteError(status, type.value_or(""), title.value_or(""), detail.value_or(""), field, index, pointer);
+}
+
+const FrameField* field_of(const std::string& name) {
+  for (const auto& f : FRAME_FIELDS) {
+    if (name == f.name) return &f;
+  }
+  return nullptr;
+}
+
+template <class T>
+void fill_as(Array& a, int value) {
+  std::fill(a.data<T>(), a.data<T>() + a.size(), static_cast<T>(value));
+}
+
+void fill(Array& a, int value) {
+  if (a.itemsize() == 1) std::fill(a.bytes.begin(), a.bytes.end(), static_cast<std::uint8_t>(value));
+  else if (a.dtype == "int32") fill_as<std::int32_t>(a, value);
+  else if (a.dtype == "float32") fill_as<float>(a, value);
+  else if (a.dtype == "float64") fill_as<double>(a, value);
+  else if (a.dtype == "int16") fill_as<std::int16_t>(a, value);
+  else if (a.dtype == "uint16") fill_as<std::uint16_t>(a, value);
+  else if (a.dtype == "uint32") fill_as<std::uint32_t>(a, value);
+  else if (a.dtype == "int64") fill_as<std::int64_t>(a, value);
+  else fill_as<std::uint64_t>(a, value);
+}
+
+// Rows of `wanted` ids in ascending `ids`, -1 where absent.
+std::vector<std::int64_t> positions(const Array& ids, const std::int32_t* wanted, std::size_t n) {
+  std::vector<std::int64_t> out(n);
+  const auto* begin = ids.data<std::int32_t>();
+  const auto* end = begin + ids.size();
+  for (std::size_t i = 0; i < n; i++) {
+    const auto* at = std::lower_bound(begin, end, wanted[i]);
+    out[i] = (at != end && *at == wanted[i]) ? at - begin : -1;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::size_t Array::size() const {
+  std::size_t n = 1;
+  for (auto s : shape) n *= static_cast<std::size_t>(s);
+  return n;
+}
+
+std::size_t Array::itemsize() const {
+  auto it = ITEMSIZE.find(dtype);
+  if (it == ITEMSIZE.end()) throw std::invalid_argument("unknown dtype " + dtype);
+  return it->second;
+}
+
+std::size_t Array::row_size() const {
+  std::size_t n = 1;
+  for (std::size_t i = 1; i < shape.size(); i++) n *= static_cast<std::size_t>(shape[i]);
+  return n;
+}
+
+RemoteError::RemoteError(int status_, std::string type_, std::string title_, std::string detail_,
+                         std::optional<std::string> field_, std::optional<std::int64_t> index_,
+                         std::optional<std::string> pointer_)
+    : std::runtime_error(std::to_string(status_) + " " + title_ + ": " + detail_),
+      status(status_), type(std::move(type_)), title(std::move(title_)), detail(std::move(detail_)),
+      field(std::move(field_)), index(index_), pointer(std::move(pointer_)) {}
+
+Answer decode_frame(const std::string& bytes) {
+  auto handle = msgpack::unpack(bytes.data(), bytes.size());
+  const auto& doc = handle.get();
+  if (doc.type != msgpack::type::MAP) throw std::runtime_error("malformed answer: not a map");
+  Answer out;
+  for (std::uint32_t i = 0; i < doc.via.map.size; i++) {
+    const auto& kv = doc.via.map.ptr[i];
+    const std::string key = key_of(kv.key);
+    if (key == "frame_index") out.frame.frame_index = as_int(kv.val);
+    else if (key == "changed_only") out.changed_only = kv.val.type == msgpack::type::BOOLEAN && kv.val.via.boolean;
+    else if (key == "rows") out.rows = decode_array(kv.val);
+    else if (field_of(key) != nullptr) out.frame.arrays[key] = decode_array(kv.val);
+  }
+  out.has_object_id = out.frame.arrays.count("object_id") > 0;
+  return out;
+}
+
+Frame merge_changed(const Frame* prev, const Frame& answer, const Array& rows, bool has_object_id) {
+  const Array* prev_ids = prev ? prev->get("object_id") : nullptr;
+  const bool same_set = !has_object_id && prev_ids != nullptr;
+  Frame f;
+  f.frame_index = answer.frame_index;
+  Array ids = same_set ? *prev_ids : (has_object_id ? *answer.get("object_id") : Array::int32({}));
+  const auto at = positions(ids, rows.data<std::int32_t>(), rows.size());
+  std::vector<std::int64_t> kept;
+  if (!same_set && prev_ids) kept = positions(*prev_ids, ids.data<std::int32_t>(), ids.size());
+  for (const auto& [name, part] : answer.arrays) {
+    const FrameField* field = field_of(name);
+    if (name == "object_id") continue;
+    if (!field->per_object) {
+      f.arrays[name] = part;
+      continue;
+    }
+    const std::size_t width = part.row_size() * part.itemsize();
+    const Array* old = prev ? prev->get(name) : nullptr;
+    Array full;
+    if (same_set && old) {
+      full = *old;
+    } else {
+      full.dtype = part.dtype;
+      full.shape = part.shape;
+      full.shape[0] = static_cast<std::int64_t>(ids.size());
+      full.bytes.resize(full.size() * full.itemsize());
+      fill(full, field->empty);
+      if (old) {
+        for (std::size_t i = 0; i < kept.size(); i++) {
+          if (kept[i] >= 0) std::memcpy(&full.bytes[i * width], &old->bytes[kept[i] * width], width);
+        }
+      }
+    }
+    for (std::size_t r = 0; r < at.size(); r++) {
+      std::memcpy(&full.bytes[at[r] * width], &part.bytes[r * width], width);
+    }
+    f.arrays[name] = std::move(full);
+  }
+  f.arrays["object_id"] = std::move(ids);
+  return f;
+}
+
+struct Client::Http {
+  explicit Http(const std::string& url) : cli(url) {
+    cli.set_keep_alive(true);
+    cli.set_read_timeout(600, 0);
+  }
+  httplib::Client cli;
+};
+
+Client::Client(const std::string& url, std::string api_key)
+    : http_(std::make_unique<Http>(url)), api_key_(std::move(api_key)) {}
+
+Client::~Client() = default;
+
+Client::Raw Client::raw(const std::string& method, const std::string& path, const std::string& body,
+                        const std::string& content_type) {
+  httplib::Request req;
+  req.method = method;
+  req.path = path;
+  req.headers = {{"Accept", content_type}};
+  if (!api_key_.empty()) req.headers.emplace("Authorization", "Bearer " + api_key_);
+  if (!body.empty()) {
+    req.body = body;
+    req.headers.emplace("Content-Type", content_type);
+  }
+  auto res = http_->cli.send(req);
+  if (!res) throw std::runtime_error("request to the service failed: " + httplib::to_string(res.error()));
+  return {res->status, res->get_header_value("Content-Type"), res->body};
+}
+
+std::string Client::call(const std::string& method, const std::string& path, const std::string& body) {
+  Raw r = raw(method, path, body);
+  if (r.status >= 400) raise_problem(r.status, r.body);
+  return r.body;
+}
+
+Session Client::session(const Config& config) {
+  msgpack::sbuffer buf;
+  Packer pk(&buf);
+  pk.pack_map(1);
+  pack_str(pk, "config");
+  pack_config(pk, config);
+  auto body = call("POST", "/v1/sessions", std::string(buf.data(), buf.size()));
+  auto handle = msgpack::unpack(body.data(), body.size());
+  const auto* id = find(handle.get(), "id");
+  const auto* index = find(handle.get(), "frame_index");
+  if (!id || !index) throw std::runtime_error("malformed answer: no session id");
+  return Session(this, key_of(*id), as_int(*index));
+}
+
+Frame Client::schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
+                       const Config& config, const std::vector<std::string>& outputs) {
+  msgpack::sbuffer buf;
+  Packer pk(&buf);
+  pk.pack_map(3 + (config.empty() ? 0 : 1) + (outputs.empty() ? 0 : 1));
+  pack_str(pk, "lights");
+  pack_fields(pk, lights);
+  pack_str(pk, "objects");
+  pack_fields(pk, objects);
+  pack_str(pk, "cameras");
+  pack_cameras(pk, cameras);
+  if (!config.empty()) {
+    pack_str(pk, "config");
+    pack_config(pk, config);
+  }
+  if (!outputs.empty()) {
+    pack_str(pk, "outputs");
+    pack_outputs(pk, outputs);
+  }
+  return decode_frame(call("POST", "/v1/schedule", std::string(buf.data(), buf.size()))).frame;
+}
+
+Frame Session::frame(const std::vector<Camera>& cameras, const FrameOptions& options) {
+  std::vector<Change> changes;
+  changes.swap(changes_);
+  msgpack::sbuffer buf;
+  Packer pk(&buf);
+  pk.pack_map(4 + (options.outputs.empty() ? 0 : 1) + (options.changed_only ? 1 : 0) + (options.stats ? 0 : 1));
+  pack_str(pk, "dt");
+  pk.pack_double(options.dt);
+  pack_str(pk, "cut");
+  options.cut ? pk.pack_true() : pk.pack_false();
+  pack_str(pk, "cameras");
+  pack_cameras(pk, cameras);
+  pack_str(pk, "changes");
+  pk.pack_array(static_cast<std::uint32_t>(changes.size()));
+  for (const auto& c : changes) {
+    pk.pack_map(2);
+    pack_str(pk, "op");
+    pack_str(pk, c.op);
+    pack_str(pk, "fields");
+    pack_fields(pk, c.fields);
+  }
+  if (!options.outputs.empty()) {
+    pack_str(pk, "outputs");
+    pack_outputs(pk, options.outputs);
+  }
+  if (options.changed_only) {
+    pack_str(pk, "changed_only");
+    pk.pack_true();
+  }
+  if (!options.stats) {
+    pack_str(pk, "stats");
+    pk.pack_false();
+  }
+  auto answer = decode_frame(client_->call("POST", "/v1/sessions/" + id_ + "/frames", std::string(buf.data(), buf.size())));
+  Frame f = answer.changed_only ? merge_changed(last_ ? &*last_ : nullptr, answer.frame, answer.rows, answer.has_object_id)
+                                : std::move(answer.frame);
+  last_ = f;
+  frame_index_ = f.frame_index + 1;
+  return f;
+}
+
+std::map<std::string, std::int64_t> Session::info() {
+  auto body = client_->call("GET", "/v1/sessions/" + id_, "");
+  auto handle = msgpack::unpack(body.data(), body.size());
+  std::map<std::string, std::int64_t> out;
+  for (const char* key : {"frame_index", "lights", "objects"}) {
+    if (const auto* v = find(handle.get(), key)) out[key] = as_int(*v);
+  }
+  return out;
+}
+
+void Session::close() { client_->call("DELETE", "/v1/sessions/" + id_, ""); }
+
+}  // namespace lightsched
