@@ -147,7 +147,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "variables: LIGHTSCHED_API_KEYS (comma-separated) or LIGHTSCHED_API_KEYS_FILE "
                     "(one per line) turn on 'Authorization: Bearer <key>'; "
                     "LIGHTSCHED_MAX_BODY_BYTES, _MAX_LIGHTS, _MAX_OBJECTS, _MAX_SESSIONS, "
-                    "_SESSION_TTL (seconds idle) and _MAX_PENDING_FRAMES set the limits.")
+                    "_SESSION_TTL (seconds idle) and _MAX_PENDING_FRAMES set the limits; "
+                    "LIGHTSCHED_CORS_ORIGINS (comma-separated) lets pages of those origins "
+                    "call the service, and LIGHTSCHED_TICKET_TTL sets the stream tickets' "
+                    "lifetime in seconds.")
     sv.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1)")
     sv.add_argument("--port", type=int, default=8080, help="TCP port (default 8080)")
     sv.add_argument("--no-demo", action="store_true",

@@ -238,6 +238,18 @@ Answer decode_frame(const std::string& bytes) {
   return out;
 }
 
+std::map<std::string, Array> decode_arrays(const std::string& bytes) {
+  auto handle = msgpack::unpack(bytes.data(), bytes.size());
+  const auto& doc = handle.get();
+  if (doc.type != msgpack::type::MAP) throw std::runtime_error("malformed: not a map");
+  std::map<std::string, Array> out;
+  for (std::uint32_t i = 0; i < doc.via.map.size; i++) {
+    const auto& kv = doc.via.map.ptr[i];
+    if (kv.val.type == msgpack::type::MAP && find(kv.val, "dtype")) out[key_of(kv.key)] = decode_array(kv.val);
+  }
+  return out;
+}
+
 Frame merge_changed(const Frame* prev, const Frame& answer, const Array& rows, bool has_object_id) {
   const Array* prev_ids = prev ? prev->get("object_id") : nullptr;
   const bool same_set = !has_object_id && prev_ids != nullptr;
@@ -283,6 +295,7 @@ Frame merge_changed(const Frame* prev, const Frame& answer, const Array& rows, b
 struct Client::Http {
   explicit Http(const std::string& url) : cli(url) {
     cli.set_keep_alive(true);
+    cli.set_tcp_nodelay(true);  // else Nagle holds the body behind the headers: +40 ms
     cli.set_read_timeout(600, 0);
   }
   httplib::Client cli;

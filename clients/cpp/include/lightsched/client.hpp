@@ -194,5 +194,7 @@ struct Answer {
   Array rows;
 };
 Answer decode_frame(const std::string& msgpack_bytes);
+// A msgpack map of array maps into Arrays by key (other values are skipped).
+std::map<std::string, Array> decode_arrays(const std::string& msgpack_bytes);
 
 }  // namespace lightsched

@@ -1,0 +1,163 @@
+"""Client benchmark: the round trip of a 1k-object frame through each client (Python,
+TypeScript on Node, C++), against one `lightsched serve`.
+
+    python bench/clients.py                 # 5 rounds of 300 frames per client
+    python bench/clients.py --rounds 3 --frames 200
+    python bench/clients.py --write         # also writes the table into bench/RESULTS.md
+
+Builds the TypeScript client (npm run build) and the C++ client (cmake, into build/cpp)
+first, and writes the scene (lightsched.scenes.city, 1k objects and 100 lights, K = 8) to
+a msgpack file each client's bench program reads. Each run is one process of one client: a
+new session, the scene, one frame, 50 warm-up frames, then timed frames in which every
+light moves (update_lights with new positions, as a game sends them), each timed from the
+update_lights call to the decoded, full frame (all outputs, HTTP, msgpack, one kept-alive
+connection). Runs are interleaved round by round, the client order rotating, and a client's
+p50 is the median of its runs' p50s; "vs Python" is the median over rounds of the
+difference of the two runs' p50s in that round (paired, as bench/paired.py compares).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import git_commit, machine, markers, say, write_results
+from service import Server
+
+REPO = Path(__file__).resolve().parent.parent
+TS = REPO / "clients" / "typescript"
+CPP_BUILD = REPO / "build" / "cpp"
+BEGIN, END = markers("clients.py")
+N_OBJECTS, N_LIGHTS, K, WARMUP = 1000, 100, 8, 50
+
+
+def write_scene(path: Path, frames: int) -> None:
+    from lightsched_client.wire import MSGPACK, dumps
+
+    from lightsched.scenes import city, move_lights
+
+    sc = city(N_OBJECTS, N_LIGHTS, seed=0)
+    cam = sc.cameras[0]
+    doc: dict[str, Any] = {f"lights.{k}": np.asarray(v) for k, v in sc.lights.items()}
+    doc.update({f"objects.{k}": np.asarray(v) for k, v in sc.objects.items()})
+    doc["camera"] = np.concatenate([cam.position, cam.forward, cam.up,
+                                    [cam.fov_y, cam.aspect, cam.near, cam.far]]).astype(np.float64)
+    poses = min(frames, 120)
+    doc["positions"] = np.stack([move_lights(sc.lights, i + 1) for i in range(poses)])
+    for name, value in (("warmup", WARMUP), ("frames", frames), ("max_lights", K)):
+        doc[name] = np.array([value], np.int64)
+    path.write_bytes(dumps(doc, MSGPACK))
+
+
+def run_python(url: str, scene_path: str) -> None:
+    """The Python client's side (this script run as a child with --run-python)."""
+    from lightsched_client import Client
+    from lightsched_client.wire import MSGPACK, loads
+
+    import lightsched as ls
+
+    scene = loads(Path(scene_path).read_bytes(), MSGPACK)
+    lights = {k[7:]: v for k, v in scene.items() if k.startswith("lights.")}
+    objects = {k[8:]: v for k, v in scene.items() if k.startswith("objects.")}
+    c = scene["camera"]
+    cam = ls.Camera(position=c[0:3], forward=c[3:6], up=c[6:9], fov_y=float(c[9]),
+                    aspect=float(c[10]), near=float(c[11]), far=float(c[12]))
+    positions = scene["positions"]
+    warmup, frames = int(scene["warmup"][0]), int(scene["frames"][0])
+    out = []
+    with Client(url) as client:
+        s = client.session({"max_lights": int(scene["max_lights"][0])})
+        s.set_lights(**lights)
+        s.set_objects(**objects)
+        s.frame(cam)
+        for i in range(warmup + frames):
+            t0 = time.perf_counter()
+            s.update_lights(id=lights["id"], position=positions[i % len(positions)])
+            f = s.frame(cam)
+            t = (time.perf_counter() - t0) * 1e3
+            assert f.light_ids is not None
+            if i >= warmup:
+                out.append(t)
+        s.close()
+    print(json.dumps({"ms": out}))
+
+
+def commands(url: str, scene: Path) -> dict[str, list[str]]:
+    return {"Python": [sys.executable, __file__, "--run-python", url, str(scene)],
+            "TypeScript (Node)": ["node", str(TS / "dist" / "bench" / "roundtrip.js"), url, str(scene)],
+            "C++": [str(CPP_BUILD / "bench_roundtrip"), url, str(scene)]}
+
+
+def build() -> None:
+    say("building the TypeScript and C++ clients")
+    subprocess.run(["npm", "run", "build"], cwd=TS, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(["cmake", "-S", str(REPO / "clients" / "cpp"), "-B", str(CPP_BUILD),
+                    "-DCMAKE_BUILD_TYPE=Release"], check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(["cmake", "--build", str(CPP_BUILD), "-j2", "--target", "bench_roundtrip"],
+                   check=True, stdout=subprocess.DEVNULL)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--frames", type=int, default=300)
+    p.add_argument("--write", action="store_true", help="write the section of RESULTS.md")
+    p.add_argument("--run-python", nargs=2, metavar=("URL", "SCENE"), help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.run_python:
+        run_python(*args.run_python)
+        return 0
+    build()
+    server = Server()
+    p50: dict[str, list[float]] = {}
+    p99: dict[str, list[float]] = {}
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            scene = Path(tmp) / "scene.msgpack"
+            write_scene(scene, args.frames)
+            cmds = commands(server.url, scene)
+            names = list(cmds)
+            for r in range(args.rounds):
+                for name in names[r % len(names):] + names[:r % len(names)]:
+                    done = subprocess.run(cmds[name], capture_output=True, text=True, check=True)
+                    ms = np.array(json.loads(done.stdout.strip().splitlines()[-1])["ms"])
+                    p50.setdefault(name, []).append(float(np.median(ms)))
+                    p99.setdefault(name, []).append(float(np.percentile(ms, 99)))
+                    say(f"round {r + 1} {name}: p50 {p50[name][-1]:.3f} ms")
+    finally:
+        server.stop()
+    info = machine()
+    rows = []
+    for name in p50:
+        diff = np.median(np.array(p50[name]) - np.array(p50["Python"]))
+        rows.append(f"| {name} | {np.median(p50[name]):.3f} | {max(p99[name]):.3f} | "
+                    f"{diff:+.3f} |")
+    worst = max(np.median(np.array(p50[n]) - np.array(p50["Python"])) for n in p50)
+    verdict = "within" if worst <= 0.3 else "NOT within"
+    section = "\n".join([
+        BEGIN, "## Clients: a 1k-object frame's round trip per client", "",
+        f"`python bench/clients.py --rounds {args.rounds} --frames {args.frames}` on "
+        f"{info['cpu']} ({info['nproc']} cores), commit {git_commit()}: the city of "
+        f"{N_OBJECTS} objects and {N_LIGHTS} lights, K = {K}, every light moving; a full "
+        "frame over HTTP/msgpack on one kept-alive connection, timed from update_lights to "
+        "the decoded frame, each client in its own process against one `lightsched serve`, "
+        f"{args.rounds} interleaved rounds of {args.frames} frames.", "",
+        "| client | p50 ms | p99 ms (worst run) | p50 vs Python (paired) |",
+        "|---|---|---|---|", *rows, "",
+        f"**Answer (issue 50):** every client's p50 is {verdict} 0.3 ms of the Python "
+        f"client's (worst paired difference {worst:+.3f} ms).", END, ""])
+    print(section)
+    if args.write:
+        write_results(section, BEGIN, END)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
