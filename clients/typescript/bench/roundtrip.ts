@@ -1,12 +1,12 @@
 // One client's side of bench/clients.py: a session of the scene in SCENE (a msgpack map of
 // arrays that bench/clients.py writes), then frames in which every light moves, each timed
 // from the updateLights call to the decoded frame. Prints {"ms": [...]} on stdout.
-//   node dist/bench/roundtrip.js URL SCENE
+//   node --experimental-websocket dist/bench/roundtrip.js URL SCENE [stream]
 import { readFileSync } from "node:fs";
 
 import { Client, MSGPACK, NdArray, decode, type Camera, type Fields } from "../src/index.js";
 
-const [url, path] = process.argv.slice(2);
+const [url, path, transport] = process.argv.slice(2);
 const scene = decode(new Uint8Array(readFileSync(path)), MSGPACK) as Record<string, NdArray>;
 const lights: Fields = {};
 const objects: Fields = {};
@@ -26,7 +26,7 @@ const k = Number((scene.max_lights.data as BigInt64Array)[0]);
 const [poses, l] = positions.shape;
 
 const client = new Client(url);
-const s = await client.session({ max_lights: k });
+const s = await client.session({ max_lights: k }, { stream: transport === "stream" });
 s.setLights(lights);
 s.setObjects(objects);
 await s.frame(cam);
