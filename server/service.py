@@ -16,7 +16,7 @@ import logging
 import secrets
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import anyio
 import numba as nb
@@ -107,6 +107,15 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
     return doc
 
 
+class StreamTicket(NamedTuple):
+    """What a stream ticket stands for: its session, the key that made it, and when it
+    expires (time.monotonic())."""
+
+    sid: str
+    owner: str | None
+    expires: float
+
+
 @dataclass
 class Session:
     id: str
@@ -132,8 +141,7 @@ class Service:
         self.sessions: dict[str, Session] = {}
         self.metrics = Metrics()
         self._swept = -float("inf")
-        # Stream tickets: ticket -> (session id, owner key, expiry on time.monotonic()).
-        self.tickets: dict[str, tuple[str, str | None, float]] = {}
+        self.tickets: dict[str, StreamTicket] = {}
 
     # ------------------------------------------------------------------ sessions
     def _idle(self, s: Session, now: float) -> bool:
@@ -185,25 +193,25 @@ class Service:
         above), so a leaked key cannot fill the service's memory with them."""
         self.session(sid, owner)
         now = time.monotonic()
-        self.tickets = {t: v for t, v in self.tickets.items() if v[2] > now}
-        live = sum(1 for v in self.tickets.values() if v[0] == sid)
+        self.tickets = {t: v for t, v in self.tickets.items() if v.expires > now}
+        live = sum(1 for v in self.tickets.values() if v.sid == sid)
         if live >= self.settings.max_pending_frames + 8:
             raise Problem(429, "too-many-tickets", "Too many tickets",
                           f"session {sid!r} already has {live} unused tickets",
                           headers={"Retry-After": str(int(self.settings.ticket_ttl) + 1)})
         ticket = secrets.token_urlsafe(24)
-        self.tickets[ticket] = (sid, owner, now + self.settings.ticket_ttl)
+        self.tickets[ticket] = StreamTicket(sid, owner, now + self.settings.ticket_ttl)
         return {"ticket": ticket, "expires_in": self.settings.ticket_ttl}
 
     def redeem_ticket(self, sid: str, ticket: str) -> str | None:
         """The owner key a ticket stands for, once: 401 if it is unknown, used, expired or
         another session's."""
         entry = self.tickets.pop(ticket, None)
-        if entry is None or entry[0] != sid or entry[2] <= time.monotonic():
+        if entry is None or entry.sid != sid or entry.expires <= time.monotonic():
             raise Problem(401, "unauthorized", "Unauthorized",
                           "the ticket is unknown, used, expired or for another session; "
                           "get a new one with POST /v1/sessions/{id}/tickets")
-        return entry[1]
+        return entry.owner
 
     # ------------------------------------------------------------------ frames
     async def frame(self, sid: str, owner: str | None, doc: Any) -> dict[str, Any]:
