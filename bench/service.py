@@ -91,13 +91,14 @@ def free_port() -> int:
 class Server:
     """``python -m lightsched serve`` on a free port; ``stop()`` terminates, then kills."""
 
-    def __init__(self, timeout: float = SERVER_START_TIMEOUT) -> None:
+    def __init__(self, timeout: float = SERVER_START_TIMEOUT,
+                 env: dict[str, str] | None = None) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.log = tempfile.TemporaryFile()
         cmd = [sys.executable, "-m", "lightsched", "serve", "--host", "127.0.0.1",
                "--port", str(self.port), "--no-demo", "--log-level", "warning"]
-        self.proc = subprocess.Popen(cmd, cwd=HERE.parent, stdout=self.log,
+        self.proc = subprocess.Popen(cmd, cwd=HERE.parent, stdout=self.log, env=env,
                                      stderr=subprocess.STDOUT)
         deadline = time.monotonic() + timeout
         while True:
