@@ -14,7 +14,8 @@ CPP_BUILD := build/cpp
 CPP_DEBS := libmsgpack-cxx-dev libcpp-httplib-dev nlohmann-json3-dev pkg-config
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: test test-quick test-ts test-cpp cpp-deps run lint bench bench-quick clean
+.PHONY: test test-quick test-ts test-cpp cpp-deps viewer browser-deps test-browser viewer-screenshot \
+	run lint bench bench-quick clean
 
 # The root distribution ships lightsched_client too (the server's wire codec): a venv made
 # before it did has the client's own distribution as well, which is dropped so that only one
@@ -29,7 +30,9 @@ $(STAMP): pyproject.toml
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: $(STAMP) lint
+# The browser tests (tests/test_viewer.py, marked browser) run in the suite: they need the
+# built viewer and Debian's chromium.
+test: $(STAMP) lint viewer browser-deps
 	$(BIN)/python -m pytest -n 2 -q --durations=15
 	$(MAKE) test-ts
 	$(MAKE) test-cpp
@@ -54,16 +57,40 @@ test-cpp: $(STAMP) cpp-deps
 	cmake --build $(CPP_BUILD) -j2
 	ctest --test-dir $(CPP_BUILD) --output-on-failure
 
+# The viewer page (/viewer): the TypeScript client's viewer/ bundled with three.js by esbuild
+# into $(TS)/dist/viewer, which the service serves.
+VIEWER := $(TS)/dist/viewer/main.js
+$(VIEWER): $(TS_STAMP) $(wildcard $(TS)/src/*.ts $(TS)/viewer/*) $(TS)/tsconfig.viewer.json
+	cd $(TS) && npm run viewer
+
+viewer: $(VIEWER)
+
+# Debian's chromium, which Playwright (its Python package, a dev extra) drives for the
+# browser tests; Playwright's own browser download is never used (nothing outside the
+# package registries can be fetched here).
+BROWSER_DEBS := chromium
+browser-deps:
+	@dpkg -s $(BROWSER_DEBS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $(BROWSER_DEBS); }
+
+test-browser: $(STAMP) viewer browser-deps
+	$(BIN)/python -m pytest -q -m browser tests/test_viewer.py
+
+# The README's picture of the viewer, as the browser test takes it (docs/viewer.png).
+viewer-screenshot: $(STAMP) viewer browser-deps
+	LIGHTSCHED_VIEWER_SCREENSHOT=docs/viewer.png $(BIN)/python -m pytest -q -m browser tests/test_viewer.py
+
 # ~3 minutes on 2 cores with numba's cache warm (the full suite takes ~20): a tenth of the
 # hypothesis examples, and without the tests marked slow (those that compile or warm up
 # every kernel in a child process). Every module still meets the oracle; `make test` is
 # what CI runs.
 test-quick: $(STAMP) lint
-	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow" --durations=10
+	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow and not browser" --durations=10
 
-# The viewer's origin under either name of this machine may call the service (a page of
-# localhost:8080 calling 127.0.0.1:8080 is cross-origin).
-run: $(STAMP)
+# The viewer is at http://127.0.0.1:8080/viewer. Its origin under either name of this
+# machine may call the service (a page of localhost:8080 calling 127.0.0.1:8080 is
+# cross-origin).
+run: $(STAMP) viewer
 	LIGHTSCHED_CORS_ORIGINS=$${LIGHTSCHED_CORS_ORIGINS-http://127.0.0.1:8080,http://localhost:8080} \
 	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
 

@@ -43,6 +43,7 @@ from .models import SCHEMAS
 from .problems import Problem
 from .service import Service
 from .settings import Settings
+from .viewer import router as viewer_router
 
 BODY_TYPES = {"content": {MSGPACK: {}, JSON: {}}}
 
@@ -372,6 +373,8 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
                     await ws.send_text(out.decode())
         except WebSocketDisconnect:
             return
+
+    app.include_router(viewer_router())
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
