@@ -180,7 +180,8 @@ function buildObjects(k: number): void {
   const lit = scheduleMaterial(new THREE.MeshStandardMaterial({ color: 0xb8bcc4, roughness: 0.8 }), table,
     { maxLights: k });
   instances = new ScheduledInstances(city.objects as never, lit.material, lit.uniforms, k);
-  overlayMesh = new THREE.InstancedMesh(instances.mesh.geometry, new THREE.MeshBasicMaterial(), instances.ids.length);
+  overlayMesh = new THREE.InstancedMesh(instances.mesh.geometry,
+    new THREE.MeshBasicMaterial({ toneMapped: false }), instances.ids.length);
   overlayMesh.instanceMatrix = instances.mesh.instanceMatrix;
   overlayMesh.setColorAt(0, new THREE.Color());
   scene.add(instances.mesh, overlayMesh);
@@ -282,7 +283,9 @@ function updateMarkers(): void {
   markers.instanceColor!.needsUpdate = true;
 }
 
-const hueOf = (j: number) => new THREE.Color().setHSL((j * 0.17 + 0.05) % 1, 0.9, 0.55);
+// Overlay colors are display (sRGB) values, untouched by tone mapping: a legend, not light.
+const SRGB = THREE.SRGBColorSpace;
+const hueOf = (j: number) => new THREE.Color().setHSL((j * 0.17 + 0.05) % 1, 0.9, 0.55, SRGB);
 
 function updateOverlay(): void {
   if (!frame || !overlayMesh || overlay === "lit") return;
@@ -304,9 +307,9 @@ function updateOverlay(): void {
   for (let i = 0; i < n; i++) {
     const seen = visible!.data[i] !== 0;
     if (overlay === "count") {
-      if (!seen) c.setRGB(0.03, 0.03, 0.04);
-      else if (candidates!.data[i] > k) c.setRGB(1, 0.1, 0.35 * Math.min(1, (candidates!.data[i] - k) / k));
-      else c.setHSL(0.66 - 0.5 * count!.data[i] / k, 0.85, 0.25 + 0.3 * count!.data[i] / k);
+      if (!seen) c.setRGB(0.03, 0.03, 0.04, SRGB);
+      else if (candidates!.data[i] > k) c.setRGB(1, 0.1, 0.35 * Math.min(1, (candidates!.data[i] - k) / k), SRGB);
+      else c.setHSL(0.66 - 0.5 * count!.data[i] / k, 0.85, 0.25 + 0.3 * count!.data[i] / k, SRGB);
     } else if (overlay === "fade") {
       let fadingIn = 0;
       let fadingOut = 0;
@@ -315,13 +318,13 @@ function updateOverlay(): void {
         if (st === 1) fadingIn++;
         else if (st === 3) fadingOut++;
       }
-      if (fadingIn && fadingOut) c.setRGB(1, 0.85, 0.1);
-      else if (fadingIn) c.setRGB(0.1, 1, 0.3);
-      else if (fadingOut) c.setRGB(1, 0.15, 0.1);
-      else c.setRGB(seen ? 0.12 : 0.03, seen ? 0.14 : 0.03, seen ? 0.2 : 0.04);
+      if (fadingIn && fadingOut) c.setRGB(1, 0.85, 0.1, SRGB);
+      else if (fadingIn) c.setRGB(0.1, 1, 0.3, SRGB);
+      else if (fadingOut) c.setRGB(1, 0.15, 0.1, SRGB);
+      else c.setRGB(seen ? 0.12 : 0.03, seen ? 0.14 : 0.03, seen ? 0.2 : 0.04, SRGB);
     } else {
       if (casterOf[i] >= 0) c.copy(hueOf(casterOf[i]));
-      else c.setRGB(0.05, 0.05, 0.07);
+      else c.setRGB(0.05, 0.05, 0.07, SRGB);
     }
     overlayMesh.setColorAt(i, c);
   }

@@ -1,0 +1,276 @@
+"""The viewer (/viewer) and the TypeScript client in a real browser: Debian's chromium
+driven by Playwright, against a real `lightsched serve` started on a free port.
+
+These need chromium (`make browser-deps`) and the built viewer (`make viewer`); `make test`
+makes both first. Without them the tests fail, saying which command to run: a skip would
+let CI pass without ever having drawn a frame.
+
+Screenshots go to build/screenshots/; with LIGHTSCHED_VIEWER_SCREENSHOT=<path> the lit
+view is also written there (`make viewer-screenshot` writes the README's docs/viewer.png).
+"""
+
+from __future__ import annotations
+
+import base64
+import functools
+import http.server
+import io
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from lightsched_server.viewer import viewer_dir
+
+pytestmark = pytest.mark.browser
+
+REPO = Path(__file__).resolve().parent.parent
+CHROMIUM = Path(os.environ.get("LIGHTSCHED_CHROMIUM", "/usr/bin/chromium"))
+SCREENSHOTS = REPO / "build" / "screenshots"
+# The first frames of a server on a machine whose numba cache is cold compile the kernels
+# they use (minutes on 2 busy cores); later ones take milliseconds.
+FIRST_FRAMES_MS = 900_000
+# WebGL without a GPU: ANGLE over SwiftShader, chromium's software renderer.
+CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def lightsched_serve(**env: str) -> Iterator[str]:
+    """`lightsched serve` in a child process on a free port, with ``env`` as its only
+    LIGHTSCHED_* settings; yields its URL."""
+    port = _free_port()
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("LIGHTSCHED_")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lightsched", "serve", "--host", "127.0.0.1", "--port", str(port),
+         "--no-demo", "--no-warm-up", "--log-level", "warning"], cwd=REPO, env={**clean, **env})
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            assert proc.poll() is None, f"lightsched serve exited with {proc.returncode}"
+            try:
+                if httpx.get(f"{url}/healthz", timeout=2).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            assert time.monotonic() < deadline, "lightsched serve did not listen within 120 s"
+            time.sleep(0.2)
+        yield url
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    if not CHROMIUM.is_file():
+        pytest.fail(f"{CHROMIUM} is missing: run `make browser-deps` (Debian's chromium)")
+    if not (viewer_dir() / "index.html").is_file():
+        pytest.fail(f"the viewer is not built in {viewer_dir()}: run `make viewer`")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def service() -> Iterator[str]:
+    with lightsched_serve() as url:
+        yield url
+
+
+def canvas_pixels(page: Any) -> np.ndarray:
+    """The canvas alone (no panels over it) as an RGB array: its drawing buffer is kept
+    (preserveDrawingBuffer), so toDataURL reads the last frame drawn."""
+    from PIL import Image
+
+    url = page.evaluate("() => document.getElementById('view').toDataURL('image/png')")
+    png = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def stats(page: Any) -> dict[str, Any]:
+    return page.evaluate("""() => { const s = window.lightsched; return {frames: s.frames,
+        frameIndex: s.frameIndex, maxCount: s.maxCount, setsChanged: s.setsChanged,
+        programs: s.programs(), error: s.error, config: s.config, explained: s.explained}; }""")
+
+
+def wait_frames(page: Any, more: int, timeout_ms: int = 120_000) -> dict[str, Any]:
+    """Waits until ``more`` frames past the current one have been drawn."""
+    start = stats(page)["frames"]
+    page.wait_for_function(f"() => window.lightsched.frames >= {start + more}", timeout=timeout_ms)
+    return stats(page)
+
+
+def open_viewer(browser: Any, service: str) -> tuple[Any, list[str]]:
+    page = browser.new_page(viewport={"width": 1280, "height": 720})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{service}/viewer")
+    page.wait_for_function("() => window.lightsched && window.lightsched.frames >= 10",
+                           timeout=FIRST_FRAMES_MS)
+    return page, errors
+
+
+def test_viewer_draws_the_city_and_reconfigures_without_recompiling(browser, service):
+    page, errors = open_viewer(browser, service)
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    first = stats(page)
+    assert first["error"] is None and first["config"]["max_lights"] == 8
+    assert first["maxCount"] > 2, "some object should hold more than two lights at K = 8"
+
+    # Not blank: a lit city has many colours, not a cleared buffer.
+    before = canvas_pixels(page)
+    assert before.std() > 5 and len(np.unique(before.reshape(-1, 3), axis=0)) > 500
+
+    # The lights move with the camera still: the picture changes and sets change, yet the
+    # patched material keeps its program (K is its only compile-time constant).
+    programs = first["programs"]
+    page.wait_for_function(f"() => window.lightsched.setsChanged >= {first['setsChanged'] + 200}",
+                           timeout=120_000)
+    moved = wait_frames(page, 10)
+    after = canvas_pixels(page)
+    changed = np.abs(after - before).max(axis=2) > 8
+    assert changed.mean() > 0.002, "the lights moved but the picture stayed the same"
+    assert moved["programs"] == programs, "a light set change compiled a shader"
+    page.screenshot(path=SCREENSHOTS / "viewer-lit.png")
+    if target := os.environ.get("LIGHTSCHED_VIEWER_SCREENSHOT"):
+        shutil.copyfile(SCREENSHOTS / "viewer-lit.png", REPO / target)
+
+    # Each overlay draws something of its own.
+    for overlay in ("count", "fade", "shadows"):
+        page.select_option("#overlay", overlay)
+        wait_frames(page, 3)
+        pixels = canvas_pixels(page)
+        assert np.abs(pixels - after).max(axis=2).mean() > 1, f"the {overlay} overlay drew nothing"
+        page.screenshot(path=SCREENSHOTS / f"viewer-{overlay}.png")
+    page.select_option("#overlay", "lit")
+
+    # K = 2: a new session, and no object holds more than two lights.
+    page.select_option("#max_lights", "2")
+    page.click("#apply")
+    page.wait_for_function("() => window.lightsched.config.max_lights === 2 && window.lightsched.frames >= 5",
+                           timeout=120_000)
+    two = wait_frames(page, 5)
+    assert two["error"] is None and 0 < two["maxCount"] <= 2
+    page.screenshot(path=SCREENSHOTS / "viewer-k2.png")
+    assert errors == []
+    page.close()
+
+
+def test_viewer_explains_a_clicked_object(browser, service):
+    page, errors = open_viewer(browser, service)
+    target = page.evaluate("() => window.lightsched.pickable()")
+    assert target is not None, "no lit object on screen to click"
+    page.mouse.click(target["x"], target["y"])
+    page.wait_for_selector("#explain table, #explain-error", timeout=30_000)
+    panel = page.inner_text("#explain")
+    assert "explain failed" not in panel, panel
+    explained = stats(page)["explained"]
+    assert explained["object_id"] == target["objectId"]
+    selected = [light for light, reason in zip(explained["light_id"], explained["reason"], strict=True)
+                if reason == "selected"]
+    assert selected, f"object {target['objectId']} holds at least two lights: {explained}"
+    for light in selected:
+        assert f"{light}\tselected" in panel or f"{light} selected" in panel, panel
+    page.screenshot(path=SCREENSHOTS / "viewer-explain.png")
+    assert errors == []
+    page.close()
+
+
+# The page of another origin: the TypeScript client (the viewer build's lightsched.js)
+# makes a session with a key, and streams frames (so a ticket, as a browser WebSocket
+# cannot send the key).
+CROSS_ORIGIN_PAGE = """<!doctype html><script type="module">
+import { Client, vectors } from "./lightsched.js";
+try {
+  const client = new Client("%(service)s", { apiKey: "browser-key" });
+  const s = await client.session({ max_lights: 4 }, { stream: true });
+  s.setLights({ id: new Int32Array([3, 5]), position: vectors([0, 0, 0, 2, 0, 0]),
+                radius: new Float64Array([10, 10]) });
+  s.setObjects({ id: new Int32Array([7]), bounds_min: vectors([-1, -1, -1]),
+                 bounds_max: vectors([1, 1, 1]) });
+  const camera = { position: [0, 0, 20], forward: [0, 0, -1], up: [0, 1, 0], fov_y: 1,
+                   aspect: 1, near: 0.1, far: 100 };
+  let f;
+  for (let i = 0; i < 5; i++) f = await s.frame(camera);
+  window.result = { frameIndex: f.frame_index, lightIds: [...f.light_ids.data] };
+} catch (e) {
+  window.result = { error: String(e) };
+}
+</script>"""
+
+
+@functools.cache
+def _quiet_handler(directory: str) -> type[http.server.SimpleHTTPRequestHandler]:
+    class Handler(http.server.SimpleHTTPRequestHandler):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, directory=directory, **kwargs)
+
+        def log_message(self, format: str, *args: Any) -> None:
+            pass
+
+    return Handler
+
+
+@contextmanager
+def page_server(directory: Path) -> Iterator[str]:
+    """A static server of ``directory`` on a free port: another origin than the service."""
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _quiet_handler(str(directory)))
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def run_page(browser: Any, url: str) -> tuple[dict[str, Any], list[str]]:
+    page = browser.new_page()
+    sockets: list[str] = []
+    page.on("websocket", lambda ws: sockets.append(ws.url))
+    page.goto(f"{url}/index.html")
+    page.wait_for_function("() => window.result !== undefined", timeout=FIRST_FRAMES_MS)
+    result = page.evaluate("() => window.result")
+    page.close()
+    return result, sockets
+
+
+def test_a_page_of_another_origin_streams_frames(browser, tmp_path):
+    shutil.copyfile(viewer_dir() / "lightsched.js", tmp_path / "lightsched.js")
+    with page_server(tmp_path) as allowed, page_server(tmp_path) as other, \
+            lightsched_serve(LIGHTSCHED_CORS_ORIGINS=allowed,
+                             LIGHTSCHED_API_KEYS="browser-key") as service:
+        (tmp_path / "index.html").write_text(CROSS_ORIGIN_PAGE % {"service": service})
+        result, sockets = run_page(browser, allowed)
+        assert "error" not in result, result
+        assert result["frameIndex"] == 4 and sorted(result["lightIds"][:2]) == [3, 5]
+        assert len(sockets) == 1 and "/stream?ticket=" in sockets[0]
+
+        # The same page from an origin the service does not list: the browser refuses it.
+        refused, _ = run_page(browser, other)
+        assert "error" in refused and "fetch" in refused["error"].lower(), refused
