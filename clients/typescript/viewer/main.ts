@@ -12,7 +12,7 @@ import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
 import { Client, type Frame, type Session } from "../src/client.js";
-import type { FieldName } from "../src/fields.js";
+import { FRAME_FIELDS, type FieldName } from "../src/fields.js";
 import { LightTable, ScheduledInstances, scheduleMaterial } from "../src/three.js";
 import { MSGPACK, NdArray, decode, vectors } from "../src/wire.js";
 
@@ -42,6 +42,8 @@ type Overlay = "lit" | "count" | "fade" | "shadows";
 const OUTPUTS: FieldName[] = ["object_id", "visible", "count", "candidates", "light_ids",
   "light_index", "fade_weight", "fade_state", "directional_lights", "shadow_lights",
   "caster_offsets", "caster_ids"];
+// The residual (DESIGN section 2) once the frame fields list it: the shader adds it then.
+if (FRAME_FIELDS.some((f) => (f.name as string) === "residual")) OUTPUTS.push("residual" as FieldName);
 const DIRECTIONAL = 2;
 // lightsched.scenes.move_lights: each point or spot light runs round a horizontal circle,
 // phase and sense from its id. Faster and wider than the benchmarks' 3 m/s on 3 m, so that
