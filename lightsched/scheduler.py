@@ -115,6 +115,10 @@ class Scheduler(SceneAPI):
         plan = plan_frame(last, changes, cams, cut, self.frame_index, cfg, tuning)
         if plan.kind == UNCHANGED:
             return self._repeat(last, plan, clock, prior)
+        began = self._began(prior)
+        # The last record holds the outputs of the frame before the last, which the objects
+        # stage takes back when nothing else holds them.
+        del prior
         vis = clock.lap("visibility", see(plan, last, lights, objects, cams,
                                           changes.object_rows))
         packed = clock.lap("pack", pack(plan, None if last is None else last.packed, lights,
@@ -130,7 +134,6 @@ class Scheduler(SceneAPI):
             packed, grid, cams, vis.objects, cfg.cascade_overlap, tuning))
         cache = clock.lap("lists", update_pair_cache(plan, last, pairs, shadows, vis, packed,
                                                      grid, changes.light_rows, tuning, buffers))
-        began = self._began(prior)
         outputs = clock.lap("objects", select_and_fade(
             plan, last, cache, shadows, vis.objects, lights, objects,
             changes.object_rows is None, cfg, dt, buffers))

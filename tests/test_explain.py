@@ -184,3 +184,20 @@ def test_explain_matches_oracle_on_random_sequences(sc, data, tuning):
                 cut=data.draw(st.integers(0, 5), label="cut") == 0)
         if t.compared == t.frames and not t.diverged:
             assert_explanations_match(t, f"frame {i}")
+
+
+def test_keeping_the_record_still_lets_frames_take_their_output_arrays_back():
+    """explain's record of the last frame references the outputs of the frame before it;
+    the next frame drops it before its objects stage, which then reuses those arrays (two
+    sets of output arrays alternate in a steady scene, buffers.SpareOutputs)."""
+    from lightsched.scenes import city, move_lights
+
+    sc = city(500, 40, seed=0)
+    s = ls.Scheduler()
+    s.set_lights(**sc.lights)
+    s.set_objects(**sc.objects)
+    addresses = []
+    for i in range(6):
+        s.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, i + 1))
+        addresses.append(s.frame(sc.cameras).light_ids.__array_interface__["data"][0])
+    assert addresses[2:] == addresses[:2] * 2
