@@ -493,10 +493,10 @@ class Scheduler(SceneAPI):
         self._explained: dict[str, Any] | None = None  # what explain reads of the last frame
 
     def _memory(self) -> Any:
-        return copy.deepcopy((self._state, self._shadowed))
+        return copy.deepcopy((self._state, self._shadowed)), self._explained
 
     def _put_back(self, memory: Any) -> None:
-        self._state, self._shadowed = memory
+        (self._state, self._shadowed), self._explained = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()

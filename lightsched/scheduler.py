@@ -91,14 +91,15 @@ class Scheduler(SceneAPI):
         # the output arrays it references can be taken back (buffers.SpareOutputs).
         self._explained: ExplainRecord | None = None
 
-    def _memory(self) -> ShadowSet | None:
-        return self._shadows
+    def _memory(self) -> tuple[ShadowSet | None, ExplainRecord | None]:
+        return self._shadows, self._explained
 
-    def _put_back(self, memory: ShadowSet | None) -> None:
+    def _put_back(self, memory: tuple[ShadowSet | None, ExplainRecord | None]) -> None:
         # The stores are put back, not the frames: last frame's stage outputs may be of
-        # the frame that was undone, so the next frame is a full one.
+        # the frame that was undone, so the next frame is a full one. explain goes on
+        # answering for the last frame that was not undone.
         self._last = None
-        self._shadows = memory
+        self._shadows, self._explained = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg, tuning, buffers = self.config, self.tuning, self._buffers

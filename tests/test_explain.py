@@ -29,8 +29,8 @@ BEHIND = ([-1.0, -1.0, -11.0], [1.0, 1.0, -9.0])  # object 2, behind the camera
 def lights(*rows: dict[str, Any]) -> dict[str, Any]:
     """set_lights keywords from rows {id, position, ...} (point lights of radius 5 by
     default)."""
-    defaults = {"type": POINT, "position": (0.0, 0.0, 0.0), "radius": 5.0, "intensity": 10.0, "mask": 1, "shadows": False,
-                "direction": (0.0, -1.0, 0.0), "outer_angle": 0.5}
+    defaults = {"type": POINT, "position": (0.0, 0.0, 0.0), "radius": 5.0, "intensity": 10.0,
+                "mask": 1, "shadows": False, "direction": (0.0, -1.0, 0.0), "outer_angle": 0.5}
     rows = tuple({**defaults, **r} for r in rows)
     return {k: np.array([r[k] for r in rows]) for k in rows[0]}
 
@@ -201,3 +201,15 @@ def test_keeping_the_record_still_lets_frames_take_their_output_arrays_back():
         s.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, i + 1))
         addresses.append(s.frame(sc.cameras).light_ids.__array_interface__["data"][0])
     assert addresses[2:] == addresses[:2] * 2
+
+
+@SCHEDULERS
+def test_a_frame_undone_by_its_transaction_leaves_explain_on_the_frame_before(make):
+    s = scheduler(make, [NEAR])
+    s.frame([CAM])
+    with pytest.raises(RuntimeError), s.transaction():
+        s.remove_lights(id=[10])
+        s.frame([CAM])
+        raise RuntimeError("the request failed after its frame")
+    e = s.explain(1)
+    assert e.frame_index == 0 and reasons(e) == {10: "selected"}
