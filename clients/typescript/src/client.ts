@@ -7,7 +7,7 @@
  * ClientOptions.WebSocket).
  */
 
-import { FRAME_FIELDS, type FieldName, type FrameArrays } from "./fields.js";
+import { FRAME_FIELDS, type Explanation, type FieldName, type FrameArrays } from "./fields.js";
 import {
   ARRAY_OF, JSON_TYPE, MSGPACK, NdArray, decode, encode, mediaType,
   type Encoding, type TypedArray,
@@ -365,6 +365,15 @@ export class Session {
     const opening = this.opening;
     opening.finally(() => { if (this.opening === opening) this.opening = undefined; }).catch(() => undefined);
     return opening;
+  }
+
+  /** Why each light is (not) on object ``objectId`` in the last frame (Scheduler.explain),
+   * asked after the frames already sent. */
+  explain(objectId: number): Promise<Explanation> {
+    const run = this.queue.then(() => this.client.call(
+      "GET", `/v1/sessions/${this.id}/objects/${objectId}/explain`) as Promise<Explanation>);
+    this.queue = run.catch(() => undefined);
+    return run;
   }
 
   /** A one-use ticket that opens this session's stream without the key. */

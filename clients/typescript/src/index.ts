@@ -3,7 +3,10 @@ export {
   type ArrayInput, type Camera, type ClientOptions, type Fields, type Frame, type FrameOptions,
   type Problem, type Vector,
 } from "./client.js";
-export { FRAME_FIELDS, type FieldName, type FrameArrays, type FrameField } from "./fields.js";
+export {
+  EXPLAIN_FIELDS, FRAME_FIELDS, REASONS, type Explanation, type FieldName, type FrameArrays,
+  type FrameField, type Reason,
+} from "./fields.js";
 export {
   ARRAY_OF, JSON_TYPE, MSGPACK, NdArray, WireError, decode, encode, fromWire, mediaType, ndarray,
   vectors, type DType, type Encoding, type TypedArray,

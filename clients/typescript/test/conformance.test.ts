@@ -8,7 +8,7 @@ import { after, before, describe, test } from "node:test";
 
 import {
   Client, JSON_TYPE, MSGPACK, NdArray, RemoteError, fromWire,
-  type Camera, type Encoding, type Fields, type Frame, type Session,
+  type Camera, type Encoding, type Explanation, type Fields, type Frame, type Session,
 } from "../src/index.js";
 import { KEY, REPO, startServer, type LiveServer } from "./server.js";
 
@@ -38,9 +38,23 @@ function checkFrame(frame: Frame, expect: any, where: string): void {
   }
 }
 
-async function outcome(call: () => Promise<Frame>, step: any, where: string): Promise<void> {
+function checkExplanation(e: Explanation, expect: any, where: string): void {
+  for (const [name, want] of Object.entries(expect as Record<string, unknown>)) {
+    const got = (e as unknown as Record<string, unknown>)[name];
+    if (want instanceof NdArray) {
+      assert.ok(got instanceof NdArray, `${where}: ${name} missing`);
+      assert.equal(got.dtype, want.dtype, `${where}: ${name} dtype`);
+      assert.ok(Buffer.from(bytes(got)).equals(Buffer.from(bytes(want))), `${where}: ${name} differs`);
+    } else {
+      assert.deepEqual(got, want, `${where}: ${name}`);
+    }
+  }
+}
+
+async function outcome<T>(call: () => Promise<T>, step: any, where: string,
+                          check: (got: T, expect: any, where: string) => void): Promise<void> {
   if (step.expect) {
-    checkFrame(await call(), step.expect, where);
+    check(await call(), step.expect, where);
     return;
   }
   await assert.rejects(call, (e: unknown) => {
@@ -64,10 +78,12 @@ export async function runScenario(doc: any, client: Client, stream: boolean): Pr
     } else if (step.call === "frame") {
       await outcome(() => session!.frame(step.cameras as Camera[], {
         dt: step.dt, cut: step.cut, outputs: step.outputs ?? undefined, changedOnly: step.changed_only,
-      }), step, where);
+      }), step, where, checkFrame);
+    } else if (step.call === "explain") {
+      await outcome(() => session!.explain(step.object_id), step, where, checkExplanation);
     } else if (step.call === "schedule") {
       await outcome(() => client.schedule(step.lights, step.objects, step.cameras, step.config,
-        step.outputs), step, where);
+        step.outputs), step, where, checkFrame);
     } else if (step.call === "info") {
       const info = await session!.info();
       for (const [k, v] of Object.entries(step.expect)) assert.equal(info[k], v, `${where}: ${k}`);
