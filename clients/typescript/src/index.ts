@@ -1,7 +1,7 @@
 export {
   Client, Session, RemoteError, ValidationError, cameraDoc, mergeChanged,
-  type ArrayInput, type Camera, type ClientOptions, type Fields, type Frame, type FrameOptions,
-  type Problem, type Vector,
+  type ArrayInput, type Camera, type ClientOptions, type FetchLike, type Fields, type Frame,
+  type FrameOptions, type Problem, type ResponseLike, type Vector,
 } from "./client.js";
 export {
   EXPLAIN_FIELDS, FRAME_FIELDS, REASONS, type Explanation, type FieldName, type FrameArrays,

@@ -8,8 +8,9 @@ import { after, before, describe, test } from "node:test";
 
 import {
   Client, JSON_TYPE, MSGPACK, NdArray, RemoteError, fromWire,
-  type Camera, type Encoding, type Explanation, type Fields, type Frame, type Session,
+  type Camera, type Encoding, type Explanation, type FetchLike, type Fields, type Frame, type Session,
 } from "../src/index.js";
+import { nodeFetch } from "../src/node.js";
 import { KEY, REPO, startServer, type LiveServer } from "./server.js";
 
 const SUITE = resolve(REPO, "schemas/conformance");
@@ -103,15 +104,17 @@ describe("conformance suite", () => {
   test("the suite is there", () => {
     assert.ok(FILES.length >= 3, `scenarios in ${SUITE}`);
   });
-  const modes: [string, Encoding, boolean][] = [
-    ["http msgpack", MSGPACK, false], ["http json", JSON_TYPE, false],
-    ["stream msgpack", MSGPACK, true], ["stream json", JSON_TYPE, true],
+  const modes: [string, Encoding, boolean, FetchLike | undefined][] = [
+    ["http msgpack", MSGPACK, false, undefined], ["http json", JSON_TYPE, false, undefined],
+    ["http msgpack (lightsched/node)", MSGPACK, false, nodeFetch()],
+    ["http json (lightsched/node)", JSON_TYPE, false, nodeFetch()],
+    ["stream msgpack", MSGPACK, true, undefined], ["stream json", JSON_TYPE, true, undefined],
   ];
   for (const file of FILES) {
-    for (const [mode, encoding, stream] of modes) {
+    for (const [mode, encoding, stream, fetch] of modes) {
       test(`${file} over ${mode}`, async () => {
         const doc = JSON.parse(readFileSync(resolve(SUITE, file), "utf8"));
-        await runScenario(doc, new Client(server.url, { apiKey: KEY, encoding }), stream);
+        await runScenario(doc, new Client(server.url, { apiKey: KEY, encoding, fetch }), stream);
       });
     }
   }
