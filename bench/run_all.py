@@ -24,7 +24,8 @@ from common import RESULTS, git_commit, machine, markers, say, write_results
 HERE = Path(__file__).resolve().parent
 BEGIN, END = markers("run_all.py")
 # In the order they run: the quick, self-contained measurements first.
-SCRIPTS = ("core.py", "service.py", "scaling.py", "stress.py", "quality.py", "peers.py", "load.py")
+SCRIPTS = ("core.py", "service.py", "scaling.py", "stress.py", "quality.py", "fade_frames.py",
+           "peers.py", "load.py")
 
 
 def sections() -> dict[str, str]:

@@ -101,6 +101,42 @@ FRAME_FIELDS: tuple[str, ...] = tuple(f.name for f in FIELDS)
 PER_OBJECT_NAMES: tuple[str, ...] = tuple(f.name for f in FIELDS if f.per_object)
 
 
+# Scheduler.explain's answer (DESIGN section 7): one row per light, ascending light id. A
+# value that does not exist for a row is NaN (floats) or -1 (integers).
+REASONS: tuple[str, ...] = (
+    "removed", "object_not_visible", "light_not_visible", "masked", "unshadowed_skip",
+    "out_of_range", "outside_cone", "directional", "selected", "waiting", "fading_out",
+    "below_k")
+
+
+@dataclass(frozen=True)
+class ExplainField:
+    """One column of an explanation (``reason``: strings, one of REASONS)."""
+
+    name: str
+    dtype: type[np.generic] | None
+    description: str
+
+    def document(self) -> dict[str, Any]:
+        return {"name": self.name, "dtype": None if self.dtype is None
+                else np.dtype(self.dtype).name, "description": self.description}
+
+
+EXPLAIN_FIELDS: tuple[ExplainField, ...] = (
+    ExplainField("light_id", np.int32, "the light"),
+    ExplainField("priority", np.float64, "P of the pair when the light affects the object "
+                 "(directional lights: i + p_user)"),
+    ExplainField("selection_priority", np.float64, "P with the hysteresis bonus when the "
+                 "light was selected last frame: the key selection compared"),
+    ExplainField("d2", np.float64, "squared distance from the light to the object's box "
+                 "(point and spot lights)"),
+    ExplainField("slot", np.int32, "the light's slot in the object's row this frame"),
+    ExplainField("fade_weight", np.float64, "that slot's fade weight"),
+    ExplainField("fade_state", np.int32, "that slot's state: 1 fading in, 2 on, 3 fading out"),
+    ExplainField("reason", None, "the first reason that applies, one of " + ", ".join(REASONS)),
+)
+
+
 def axis_size(axis: str, n: int, k: int, cascades: int) -> int:
     """The length of an axis in a frame of ``n`` objects where nothing is lit, seen or
     shadowed (and no camera ran)."""
@@ -110,10 +146,13 @@ def axis_size(axis: str, n: int, k: int, cascades: int) -> int:
 def fields_json() -> str:
     """schemas/frame_fields.json and its copy in the client package: one field a line."""
     comment = ("Generated from lightsched/fields.py by python -m lightsched_server.schemas; "
-               "do not edit. DESIGN section 3's frame arrays, in its order.")
+               "do not edit. DESIGN section 3's frame arrays, in its order, then the "
+               "columns of explain (section 7) and its reasons, in their order.")
     rows = ",\n".join("    " + json.dumps(f.document()) for f in FIELDS)
-    return f'{{\n  "$comment": {json.dumps(comment)},\n  "fields": [\n{rows}\n  ]\n}}\n'
+    explain = ",\n".join("    " + json.dumps(f.document()) for f in EXPLAIN_FIELDS)
+    return (f'{{\n  "$comment": {json.dumps(comment)},\n  "fields": [\n{rows}\n  ],\n'
+            f'  "explain_fields": [\n{explain}\n  ],\n  "reasons": {json.dumps(list(REASONS))}\n}}\n')
 
 
-__all__ = ["FIELDS", "FIELDS_BY_NAME", "FRAME_FIELDS", "PER_OBJECT_NAMES", "FrameField",
-           "axis_size", "fields_json"]
+__all__ = ["EXPLAIN_FIELDS", "FIELDS", "FIELDS_BY_NAME", "FRAME_FIELDS", "PER_OBJECT_NAMES",
+           "REASONS", "ExplainField", "FrameField", "axis_size", "fields_json"]

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from .explain import ExplainRow, Explanation, explanation, object_row
 from .frame import Frame, empty_frame, freeze
 from .scene import (
     DIRECTIONAL,
@@ -52,6 +53,7 @@ from .scene import (
     Camera,
     Config,
     SceneAPI,
+    ValidationError,
 )
 
 R0 = 0.1  # metres: the falloff's softening distance r0
@@ -488,12 +490,13 @@ class Scheduler(SceneAPI):
         super().__init__(config)
         self._state: dict[int, _ObjectState] = {}
         self._shadowed: dict[int, int] = {}  # light id -> tier, last frame's shadow lights
+        self._explained: dict[str, Any] | None = None  # what explain reads of the last frame
 
     def _memory(self) -> Any:
-        return copy.deepcopy((self._state, self._shadowed))
+        return copy.deepcopy((self._state, self._shadowed)), self._explained
 
     def _put_back(self, memory: Any) -> None:
-        self._state, self._shadowed = memory
+        (self._state, self._shadowed), self._explained = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()
@@ -507,6 +510,9 @@ class Scheduler(SceneAPI):
         # Fade state follows ids; ids gone from the store lose it.
         live = {ob.id for ob in objects}
         self._state = {oid: st for oid, st in self._state.items() if oid in live}
+        began = {ob.id: (set() if is_new[ob.row] or ob.id not in self._state
+                         else {s[0] for s in self._state[ob.id].slots})
+                 for ob in objects}
 
         light_visible, object_visible = _visibility(lights, objects, cams)
         shadow_ids, tiers = self._shadow_lights(lights, objects, cams, light_visible,
@@ -520,6 +526,7 @@ class Scheduler(SceneAPI):
         frame = empty_frame(self.objects.id, cfg.max_lights, cfg.cascades)
         row_of = {lt.id: lt.row for lt in lights}
         pairs = 0
+        explained: dict[int, Any] = {}  # object id -> (last selection, slots, selection)
         for ob in objects:
             st = self._state.get(ob.id)
             new = is_new[ob.row] or st is None
@@ -541,6 +548,7 @@ class Scheduler(SceneAPI):
             st.selected = set(selected)
             st.visible = True
             _write_object(frame, ob.row, st.slots, prio, row_of, shadow_index, cfg)
+            explained[ob.id] = (prev_selected, copy.deepcopy(st.slots), set(selected))
 
         directional = {lt.id: lt.intensity + lt.p_user for lt in lights
                        if lt.type == DIRECTIONAL and not skipped[lt.row]}
@@ -553,6 +561,11 @@ class Scheduler(SceneAPI):
                                         dtype=np.int32)
         frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],
                                         dtype=np.float64).reshape(len(cams), cfg.cascades + 1)
+        self._explained = {
+            "frame_index": self.frame_index, "config": cfg, "cameras": cams,
+            "lights": lights, "objects": objects, "light_visible": light_visible,
+            "object_visible": object_visible, "skipped": skipped, "competing": competing,
+            "began": began, "objects_state": explained}
         frame.stats = {
             "plan": {"all": "reference"},
             "counts": {
@@ -563,6 +576,62 @@ class Scheduler(SceneAPI):
             "seconds": {"total": time.perf_counter() - t0},
         }
         return freeze(frame)
+
+    def explain(self, object_id: Any) -> Explanation:
+        """DESIGN section 7, explain: each light that was visible, holds a slot of the
+        object or held one when the last frame began, with the first reason that applies."""
+        rec = self._explained
+        if rec is None:
+            raise ValidationError("object_id", None, "no frame has run yet")
+        objects: list[_Object] = rec["objects"]
+        ob = objects[object_row(np.array([o.id for o in objects], np.int64), object_id)]
+        cfg: Config = rec["config"]
+        lights: list[_Light] = rec["lights"]
+        by_id = {lt.id: lt for lt in lights}
+        visible = rec["object_visible"][ob.row]
+        prev_selected, slots, selected = rec["objects_state"].get(ob.id, (set(), [], set()))
+        prio = _priorities(rec["competing"], ob, rec["cameras"], cfg) if visible else {}
+        lit = sorted((s for s in slots if s[2] != FADING_OUT), key=lambda s: (-prio[s[0]], s[0]))
+        out = sorted((s for s in slots if s[2] == FADING_OUT), key=lambda s: (-s[1], s[0]))
+        slot_of = {s[0]: (k, s) for k, s in enumerate(lit + out)}
+        wanted = ({lt.id for lt in lights if rec["light_visible"][lt.row]}
+                  | set(slot_of) | rec["began"][ob.id])
+        rows: dict[int, ExplainRow] = {}
+        for lid in wanted:
+            lt = by_id.get(lid)
+            d2 = math.nan if lt is None or lt.type == DIRECTIONAL else \
+                box_distance2(ob.lo, ob.hi, lt.position)
+            p = prio.get(lid, math.nan)
+            key = math.nan
+            if lid in prio:
+                key = p + cfg.hysteresis * abs(p) + cfg.hysteresis_abs \
+                    if lid in prev_selected else p
+            if lt is None:
+                reason = "removed"
+            elif not visible:
+                reason = "object_not_visible"
+            elif not rec["light_visible"][lt.row]:
+                reason = "light_not_visible"
+            elif not lt.mask & ob.mask:
+                reason = "masked"
+            elif rec["skipped"][lt.row]:
+                reason = "unshadowed_skip"
+            elif lt.type == DIRECTIONAL and not cfg.directional_in_slots:
+                reason, p = "directional", lt.intensity + lt.p_user
+            elif lid not in prio:
+                reason = "out_of_range" if not d2 <= lt.radius * lt.radius else "outside_cone"
+            elif lid in slot_of and slot_of[lid][1][2] != FADING_OUT:
+                reason = "selected"
+            elif lid in selected:
+                reason = "waiting"
+            elif lid in slot_of:
+                reason = "fading_out"
+            else:
+                reason = "below_k"
+            k, slot = slot_of.get(lid, (-1, None))
+            rows[lid] = ExplainRow(p, key, d2, k, math.nan if slot is None else slot[1],
+                                   -1 if slot is None else slot[2], reason)
+        return explanation(ob.id, rec["frame_index"], rows)
 
     def _shadow_lights(self, lights: list[_Light], objects: list[_Object],
                        cams: list[CameraFrame], light_visible: list[bool],

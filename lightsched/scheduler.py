@@ -35,6 +35,7 @@ import numpy as np
 from .buffers import Buffers
 from .casters import Casters, find_casters
 from .changes import Changes, find_changes
+from .explain import ExplainRecord, Explanation, explain_record
 from .frame import Frame, empty_frame, freeze
 from .frustum import Cameras, frame_cameras
 from .grid import Grid, object_grid
@@ -43,7 +44,7 @@ from .pair_cache import PairCache, update_pair_cache
 from .pairs import Pairs, find_pairs
 from .plan import UNCHANGED, FramePlan, plan_frame
 from .priority import Packed, pack
-from .scene import Camera, Config, SceneAPI
+from .scene import Camera, Config, SceneAPI, ValidationError
 from .shadows import ShadowSet, choose_shadows
 from .tuning import Tuning
 from .visibility import Visibility, see
@@ -86,15 +87,19 @@ class Scheduler(SceneAPI):
         # frame that stopped half way (which leaves no FrameState behind).
         self._shadows: ShadowSet | None = None
         self._buffers = Buffers()
+        # What explain reads of the last frame; dropped when the next one starts, so that
+        # the output arrays it references can be taken back (buffers.SpareOutputs).
+        self._explained: ExplainRecord | None = None
 
-    def _memory(self) -> ShadowSet | None:
-        return self._shadows
+    def _memory(self) -> tuple[ShadowSet | None, ExplainRecord | None]:
+        return self._shadows, self._explained
 
-    def _put_back(self, memory: ShadowSet | None) -> None:
+    def _put_back(self, memory: tuple[ShadowSet | None, ExplainRecord | None]) -> None:
         # The stores are put back, not the frames: last frame's stage outputs may be of
-        # the frame that was undone, so the next frame is a full one.
+        # the frame that was undone, so the next frame is a full one. explain goes on
+        # answering for the last frame that was not undone.
         self._last = None
-        self._shadows = memory
+        self._shadows, self._explained = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg, tuning, buffers = self.config, self.tuning, self._buffers
@@ -102,6 +107,7 @@ class Scheduler(SceneAPI):
         # Installed again at the end: a frame that stops half way (an exception) leaves no
         # state behind, so the next frame is full instead of trusting half-updated lists.
         last, self._last = self._last, None
+        prior, self._explained = self._explained, None
         clock = _Clock()
         cams = clock.lap("cameras", frame_cameras(
             cameras, None if last is None else last.cameras, cfg.cascades, cfg.shadow_distance))
@@ -109,7 +115,11 @@ class Scheduler(SceneAPI):
             None if last is None else last.changes, lights, objects))
         plan = plan_frame(last, changes, cams, cut, self.frame_index, cfg, tuning)
         if plan.kind == UNCHANGED:
-            return self._repeat(last, plan, clock)
+            return self._repeat(last, plan, clock, prior)
+        began = self._began(prior)
+        # The last record holds the outputs of the frame before the last, which the objects
+        # stage takes back when nothing else holds them.
+        del prior
         vis = clock.lap("visibility", see(plan, last, lights, objects, cams,
                                           changes.object_rows))
         packed = clock.lap("pack", pack(plan, None if last is None else last.packed, lights,
@@ -130,6 +140,9 @@ class Scheduler(SceneAPI):
             changes.object_rows is None, cfg, dt, buffers))
         frame = self._output(last, cams, vis, shadows, casters, outputs)
         self._shadows = shadows
+        self._explained = ExplainRecord(
+            self.frame_index, cfg, *self.snapshot(), frame, shadows.live, vis.lights, cache.seg,
+            cache.heap, objects.get("selected"), *began)
         self._last = FrameState(changes, cams, vis, packed, grid, pairs, shadows, casters, cache,
                                 outputs, frame)
         clock.lap("output", None)
@@ -141,6 +154,25 @@ class Scheduler(SceneAPI):
                                               outputs, frame),
                        "seconds": clock.seconds()}
         return frame
+
+    def _began(self, prior: ExplainRecord | None) -> tuple[np.ndarray, ...]:
+        """explain's view of the object rows as the frame begins: last frame's selection
+        (copied, into the last record's copy: the object pass overwrites it in place), the
+        slots' lights, was_visible and is_new (replaced whole, never written in place)."""
+        objects = self.objects
+        selected = objects.get("selected")
+        copy = None if prior is None else prior.prev_selected
+        if copy is None or copy.shape != selected.shape or copy is prior.selected:
+            copy = np.empty_like(selected)
+        np.copyto(copy, selected)
+        return copy, objects.get("slot_light"), objects.get("was_visible"), objects.is_new
+
+    def explain(self, object_id: Any) -> Explanation:
+        """Why each light is (not) on object ``object_id`` in the last frame (DESIGN section
+        7; explain.py)."""
+        if self._explained is None:
+            raise ValidationError("object_id", None, "no frame has run yet")
+        return explain_record(self._explained, object_id)
 
     def _output(self, last: FrameState | None, cams: Cameras, vis: Visibility,
                 shadows: ShadowSet, casters: Casters, outputs: Outputs) -> Frame:
@@ -179,11 +211,18 @@ class Scheduler(SceneAPI):
             "threads": nb.get_num_threads(),
         }
 
-    def _repeat(self, last: FrameState, plan: FramePlan, clock: _Clock) -> Frame:
+    def _repeat(self, last: FrameState, plan: FramePlan, clock: _Clock,
+                prior: ExplainRecord | None) -> Frame:
         """An UNCHANGED frame: the last frame's arrays are this frame's (frames are
         read-only, so they can share them)."""
         self._last = last
         frame = Frame(**last.frame.arrays())
+        if prior is not None:
+            objects = self.objects
+            self._explained = prior._replace(
+                frame_index=self.frame_index, frame=frame, prev_selected=prior.selected,
+                held=objects.get("slot_light"), was_visible=objects.get("was_visible"),
+                is_new=objects.is_new)
         plan_text = {stage: f"{text} (kept: nothing changed)"
                      for stage, text in last.frame.stats["plan"].items() if stage != "frame"}
         plan_text["frame"] = f"{plan.kind}: {plan.why}"

@@ -320,6 +320,16 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         service.session(sid, key)
         return await answer(request, lambda doc: service.frame(sid, key, doc))
 
+    @app.get("/v1/sessions/{sid}/objects/{object_id}/explain", tags=["sessions"],
+             responses=_answers("explanation"))
+    async def explain(request: Request, sid: str, object_id: str) -> Response:
+        """Why each light is (not) on the object in the session's last frame
+        (lightsched.Scheduler.explain): one row per light that was visible, holds a slot of
+        the object or held one when the frame began, with the first reason that applies."""
+        key = key_of(request.headers, cfg)
+        oid: Any = int(object_id) if object_id.lstrip("-").isdigit() else object_id
+        return reply(request, await service.explain(sid, key, oid))
+
     @app.post("/v1/sessions/{sid}/tickets", tags=["sessions"], status_code=201,
               responses=_answers("ticket", 201))
     async def ticket(request: Request, sid: str) -> Response:

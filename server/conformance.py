@@ -3,10 +3,11 @@ answers it must get, as scikit-learn's check_estimator holds every estimator to 
 
 A scenario is a list of steps, each one call of the client API under DESIGN section 7's
 names: ``session`` (with a config), the six scene changes (held until the next frame),
-``frame``, ``info``, ``close`` and the stateless ``schedule``. A ``frame`` or ``schedule``
-step carries either ``expect`` (the frame_index and every array asked for, as the full
-frame: a client merges changed_only answers before comparing) or ``error`` (status, type,
-field, index and pointer of the problem document). Arrays are JSON wire maps (base64).
+``frame``, ``explain``, ``info``, ``close`` and the stateless ``schedule``. A ``frame``,
+``explain`` or ``schedule`` step carries either ``expect`` (the frame_index and every array
+asked for, as the full frame: a client merges changed_only answers before comparing; an
+explanation's object_id, frame_index and columns) or ``error`` (status, type, field, index
+and pointer of the problem document). Arrays are JSON wire maps (base64).
 
 The expectations come from the embedded lightsched.Scheduler, not from the service, so
 the suite also holds the service to the embedded API. A refused frame leaves nothing
@@ -29,7 +30,7 @@ from lightsched.scene import CHANGE_OPS, validate_cameras, validate_dt
 from lightsched.scenes import city, move_lights
 
 from .problems import TYPE_BASE, invalid
-from .service import CHANGE_KEYS
+from .service import CHANGE_KEYS, explanation_document
 
 
 def _wire(value: Any) -> Any:
@@ -107,6 +108,19 @@ class Script:
             step["error"] = _error(invalid(e))
         self.steps.append(step)
 
+    def explain(self, object_id: int) -> None:
+        """explain of the last frame: the columns as the service sends them, or the
+        refusal of an id the last frame did not have."""
+        assert self.sched is not None
+        step: dict[str, Any] = {"call": "explain", "object_id": object_id}
+        try:
+            doc = explanation_document(self.sched.explain(object_id))
+            step["expect"] = {k: v if k == "reason" or np.isscalar(v) else _wire(v)
+                              for k, v in doc.items()}
+        except ls.ValidationError as e:
+            step["error"] = _error(invalid(e))
+        self.steps.append(step)
+
     def info(self) -> None:
         s = self.sched
         assert s is not None
@@ -168,6 +182,8 @@ def lifecycle() -> Script:
              bounds_max=sc.objects["bounds_max"][:5] + 3.0)
     s.change("remove_objects", id=ids[10:20])
     s.frame(sc.cameras, dt=0.05, changed_only=True)
+    for oid in ids[:3]:
+        s.explain(int(oid))
     s.change("remove_lights", id=sc.lights["id"][:3])
     s.change("set_objects", id=np.array([5000, 5001], np.int32),
              bounds_min=np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 10.0]]),
@@ -207,6 +223,8 @@ def refusals() -> Script:
     s.frame([{**cam, "fov_y": -1.0}])  # refused: cameras.fov_y
     s.frame([cam, {**cam, "id": 0}])  # refused: a repeated camera id
     s.frame(sc.cameras, dt=-0.5)  # refused: dt
+    s.explain(int(sc.objects["id"][0]))  # the first frame's, after six refused ones
+    s.explain(123456)  # refused: no such object
     s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, 1))
     s.frame(sc.cameras, changed_only=True)
     s.info()

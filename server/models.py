@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, create_model
 
-from lightsched.fields import FIELDS, FRAME_FIELDS
+from lightsched.fields import EXPLAIN_FIELDS, FIELDS, FRAME_FIELDS, REASONS
 from lightsched.scene import CHANGE_OPS, LIGHT_FIELDS, OBJECT_FIELDS
 
 WIRE_ARRAY_SCHEMA = {
@@ -174,6 +174,24 @@ FrameResponse = create_model(
     **{f.name: (WireArray | None, Field(None, description=_array_doc(f))) for f in FIELDS})
 
 
+def _column(f: Any) -> tuple[Any, Any]:
+    if f.dtype is None:
+        return list[str], Field(description=f.description)
+    return WireArray, Field(description=f"{f.description} ({np.dtype(f.dtype).name} [L])")
+
+
+# The columns are lightsched.fields.EXPLAIN_FIELDS, in its order.
+ExplanationResponse = create_model(
+    "ExplanationResponse",
+    __doc__="GET /v1/sessions/{id}/objects/{object_id}/explain (lightsched.Scheduler.explain, "
+            "DESIGN section 7): one row per light (L of them) that was visible, holds a slot "
+            "of the object or held one when the last frame began, in ascending light id; NaN "
+            "or -1 where a value does not exist; reason: the first that applies, one of "
+            + ", ".join(REASONS) + ".",
+    object_id=(int, ...), frame_index=(int, Field(description="the frame explained")),
+    **{f.name: _column(f) for f in EXPLAIN_FIELDS})
+
+
 class ProblemModel(BaseModel):
     """An error (RFC 9457), with DESIGN's field and first bad index for bad input."""
 
@@ -191,5 +209,5 @@ SCHEMAS: dict[str, type[BaseModel]] = {
     "config": ConfigModel, "camera": CameraModel, "change": Change,
     "frame_request": FrameRequest, "schedule_request": ScheduleRequest,
     "session_request": SessionRequest, "session": SessionInfo, "frame": FrameResponse,
-    "problem": ProblemModel, "ticket": Ticket,
+    "problem": ProblemModel, "ticket": Ticket, "explanation": ExplanationResponse,
 }

@@ -72,7 +72,28 @@ def fields_ts() -> str:
             "export type FieldName =\n"
             + "\n".join(f"  | {json.dumps(d['name'])}" for d in docs) + ";\n\n"
             "/** The arrays of a frame; those not asked for (outputs) are absent. */\n"
-            f"export interface FrameArrays {{\n{props}\n}}\n")
+            f"export interface FrameArrays {{\n{props}\n}}\n" + _explain_ts())
+
+
+def _explain_ts() -> str:
+    """explain's reasons and columns (lightsched.fields) as TypeScript."""
+    from lightsched.fields import EXPLAIN_FIELDS, REASONS
+
+    cols = "\n".join(
+        f"  /** {f.description} */\n  {f.name}: "
+        + ("Reason[]" if f.dtype is None else f"NdArray<{TS_ARRAYS[np.dtype(f.dtype).name]}>")
+        + ";" for f in EXPLAIN_FIELDS)
+    return ("\n// Scheduler.explain (DESIGN section 7): its reasons, in their order, and its "
+            "columns.\n"
+            f"export const REASONS = {json.dumps(list(REASONS))} as const;\n\n"
+            "export type Reason = (typeof REASONS)[number];\n\n"
+            f"export const EXPLAIN_FIELDS = {json.dumps([f.name for f in EXPLAIN_FIELDS])} "
+            "as const;\n\n"
+            "/** One row per light that was visible, held a slot of the object or held one when "
+            "the last frame\n * began, in ascending light id; NaN or -1 where a value does not "
+            "exist. */\n"
+            "export interface Explanation {\n  object_id: number;\n  /** the frame explained "
+            f"*/\n  frame_index: number;\n{cols}\n}}\n")
 
 
 CPP_FIELDS = REPO / "clients" / "cpp" / "include" / "lightsched" / "fields.hpp"

@@ -25,6 +25,7 @@ from pydantic import BaseModel
 from pydantic import ValidationError as PydanticError
 
 import lightsched as ls
+from lightsched.explain import Explanation
 from lightsched.fields import FRAME_FIELDS, PER_OBJECT_NAMES
 from lightsched.frame import changed_rows
 from lightsched.scene import validate_cameras, validate_dt
@@ -104,6 +105,15 @@ def frame_document(f: ls.Frame, outputs: list[str] | None, frame_index: int,
             doc[name] = getattr(f, name)
     if stats:
         doc["stats"] = f.stats
+    return doc
+
+
+def explanation_document(e: Explanation) -> dict[str, Any]:
+    """The response map of an explanation: object_id, frame_index and its columns
+    (fields.EXPLAIN_FIELDS; reason as a list of strings)."""
+    doc: dict[str, Any] = {"object_id": e.object_id, "frame_index": e.frame_index}
+    doc.update(e.columns())
+    doc["reason"] = list(e.reason)
     return doc
 
 
@@ -293,6 +303,16 @@ class Service:
             1 if len(sched.objects) < self.settings.small_scene else nb.config.NUMBA_NUM_THREADS)
         nb.set_num_threads(min(n, nb.config.NUMBA_NUM_THREADS))
         return sched.frame(cams, dt=dt, cut=cut)
+
+    async def explain(self, sid: str, owner: str | None, object_id: Any) -> dict[str, Any]:
+        """GET .../objects/{object_id}/explain: Scheduler.explain for the session's last
+        frame, as a map of its columns (after the session's queued frames)."""
+        s = self.session(sid, owner)
+        async with s.lock:
+            try:
+                return explanation_document(s.scheduler.explain(object_id))
+            except ls.ValidationError as e:
+                raise invalid(e) from None
 
     async def schedule(self, doc: Any) -> dict[str, Any]:
         """POST /v1/schedule: the stateless one-frame call."""

@@ -38,9 +38,20 @@ def check_frame(frame: Any, expect: dict[str, Any], where: str) -> None:
         assert np.array_equal(got, want), f"{where}: {name} differs"
 
 
-def outcome(call: Any, step: dict[str, Any], where: str) -> None:
+def check_explanation(e: Any, expect: dict[str, Any], where: str) -> None:
+    for name, want in expect.items():
+        got = getattr(e, name)
+        if isinstance(want, dict):
+            want = from_wire(want)
+            assert got.dtype == want.dtype, (where, name)
+            assert np.array_equal(got, want, equal_nan=want.dtype.kind == "f"), (where, name)
+        else:
+            assert got == want, (where, name)
+
+
+def outcome(call: Any, step: dict[str, Any], where: str, check: Any = check_frame) -> None:
     if "expect" in step:
-        check_frame(call(), step["expect"], where)
+        check(call(), step["expect"], where)
         return
     with pytest.raises(RemoteError) as e:
         call()
@@ -66,6 +77,9 @@ def run(doc: dict[str, Any], client: Client, stream: bool) -> None:
             outcome(partial(client.schedule, from_wire(step["lights"]),
                             from_wire(step["objects"]), from_wire(step["cameras"]),
                             step["config"], step["outputs"]), step, where)
+        elif call == "explain":
+            outcome(partial(session.explain, step["object_id"]), step, where,
+                    check_explanation)
         elif call == "info":
             info = session.info()
             assert {k: info[k] for k in step["expect"]} == step["expect"], where
@@ -77,7 +91,7 @@ def run(doc: dict[str, Any], client: Client, stream: bool) -> None:
 
 def test_the_suite_covers_every_call():
     calls = {s["call"] for path in SUITE for s in json.loads(path.read_text())["steps"]}
-    assert calls == {"session", "frame", "info", "close", "schedule", *CHANGE_OPS}
+    assert calls == {"session", "frame", "explain", "info", "close", "schedule", *CHANGE_OPS}
     errors = [s["error"]["status"] for path in SUITE for s in json.loads(path.read_text())["steps"]
               if "error" in s]
     assert 404 in errors and errors.count(422) >= 5

@@ -251,3 +251,24 @@ def test_array_map_with_wrong_keys_is_malformed(plain, array, kind):
     assert problem["pointer"] == "/changes/0/fields/id"
     with Client(plain.url) as c:
         assert c.call("GET", f"/v1/sessions/{sid}")["lights"] == len(SCENE.lights["id"])
+
+
+def test_explain_over_http_names_object_id_when_refused(plain):
+    with Client(plain.url) as c:
+        s = c.session(CONFIG)
+        path = f"/v1/sessions/{s.id}/objects/{int(SCENE.objects['id'][0])}/explain"
+        status, _, body = request(plain, "GET", path, headers={"Accept": JSON})
+        assert status == 422 and loads(body, JSON)["field"] == "object_id"  # no frame yet
+        s.set_lights(**SCENE.lights)
+        s.set_objects(**SCENE.objects)
+        s.frame(SCENE.cameras)
+        status, _, body = request(plain, "GET", path, headers={"Accept": JSON})
+        doc = loads(body, JSON)
+        assert status == 200 and doc["frame_index"] == 0 and len(doc["reason"]) > 0
+        for bad in ("abc", "1.5", "99999999999999999999"):
+            status, _, body = request(plain, "GET", path.replace(
+                f"/{int(SCENE.objects['id'][0])}/", f"/{bad}/"), headers={"Accept": JSON})
+            assert status == 422 and loads(body, JSON)["field"] == "object_id", (bad, body)
+        status, _, _ = request(plain, "GET", "/v1/sessions/nope/objects/1/explain")
+        assert status == 404
+        s.close()

@@ -238,6 +238,25 @@ Answer decode_frame(const std::string& bytes) {
   return out;
 }
 
+Explanation decode_explanation(const std::string& bytes) {
+  auto handle = msgpack::unpack(bytes.data(), bytes.size());
+  const auto& doc = handle.get();
+  if (doc.type != msgpack::type::MAP) throw std::runtime_error("malformed answer: not a map");
+  Explanation out;
+  for (std::uint32_t i = 0; i < doc.via.map.size; i++) {
+    const auto& kv = doc.via.map.ptr[i];
+    const std::string key = key_of(kv.key);
+    if (key == "object_id") out.object_id = as_int(kv.val);
+    else if (key == "frame_index") out.frame_index = as_int(kv.val);
+    else if (key == "reason" && kv.val.type == msgpack::type::ARRAY) {
+      for (std::uint32_t j = 0; j < kv.val.via.array.size; j++) out.reason.push_back(key_of(kv.val.via.array.ptr[j]));
+    } else if (kv.val.type == msgpack::type::MAP && find(kv.val, "dtype")) {
+      out.columns[key] = decode_array(kv.val);
+    }
+  }
+  return out;
+}
+
 std::map<std::string, Array> decode_arrays(const std::string& bytes) {
   auto handle = msgpack::unpack(bytes.data(), bytes.size());
   const auto& doc = handle.get();
@@ -413,6 +432,11 @@ std::map<std::string, std::int64_t> Session::info() {
     if (const auto* v = find(handle.get(), key)) out[key] = as_int(*v);
   }
   return out;
+}
+
+Explanation Session::explain(std::int64_t object_id) {
+  return decode_explanation(
+      client_->call("GET", "/v1/sessions/" + id_ + "/objects/" + std::to_string(object_id) + "/explain", ""));
 }
 
 void Session::close() { client_->call("DELETE", "/v1/sessions/" + id_, ""); }

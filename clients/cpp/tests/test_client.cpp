@@ -185,9 +185,25 @@ std::string show(const std::optional<T>& v) {
   return os.str();
 }
 
-void outcome(const std::function<Frame()>& call, const json& step, const std::string& where) {
+void check_explanation(const Explanation& e, const json& expect, const std::string& where) {
+  for (const auto& [name, want] : expect.items()) {
+    if (name == "object_id") CHECK(e.object_id == want.get<std::int64_t>(), where << ": object_id");
+    else if (name == "frame_index") CHECK(e.frame_index == want.get<std::int64_t>(), where << ": frame_index");
+    else if (name == "reason") CHECK(e.reason == want.get<std::vector<std::string>>(), where << ": reason");
+    else {
+      const Array* got = e.get(name);
+      CHECK(got != nullptr, where << ": " << name << " missing");
+      Array w = array_of(want);
+      CHECK(got->dtype == w.dtype && got->bytes == w.bytes, where << ": " << name << " differs");
+    }
+  }
+}
+
+template <class T>
+void outcome(const std::function<T()>& call, void (*check)(const T&, const json&, const std::string&),
+             const json& step, const std::string& where) {
   if (step.contains("expect")) {
-    check_frame(call(), step["expect"], where);
+    check(call(), step["expect"], where);
     return;
   }
   const json& want = step.at("error");
@@ -235,13 +251,16 @@ void run_scenario(const json& doc, Client& client) {
       o.changed_only = step.at("changed_only");
       o.outputs = outputs_of(step.at("outputs"));
       const auto cams = cameras_of(step.at("cameras"));
-      outcome([&] { return session->frame(cams, o); }, step, where);
+      outcome<Frame>([&] { return session->frame(cams, o); }, check_frame, step, where);
+    } else if (call == "explain") {
+      const auto oid = step.at("object_id").get<std::int64_t>();
+      outcome<Explanation>([&] { return session->explain(oid); }, check_explanation, step, where);
     } else if (call == "schedule") {
       const auto cams = cameras_of(step.at("cameras"));
-      outcome([&] {
+      outcome<Frame>([&] {
         return client.schedule(fields_of(step.at("lights")), fields_of(step.at("objects")), cams,
                                config_of(step.at("config")), outputs_of(step.at("outputs")));
-      }, step, where);
+      }, check_frame, step, where);
     } else if (call == "info") {
       auto info = session->info();
       for (const auto& [k, v] : step.at("expect").items()) {

@@ -9,12 +9,13 @@ from .client import (
     AsyncClient,
     AsyncRemoteScheduler,
     Client,
+    Explanation,
     Frame,
     RemoteError,
     RemoteScheduler,
     ValidationError,
 )
 
-__all__ = ["AsyncClient", "AsyncRemoteScheduler", "Client", "Frame", "RemoteError",
-           "RemoteScheduler", "ValidationError"]
+__all__ = ["AsyncClient", "AsyncRemoteScheduler", "Client", "Explanation", "Frame",
+           "RemoteError", "RemoteScheduler", "ValidationError"]
 __version__ = "0.1.0"

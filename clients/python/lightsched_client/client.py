@@ -31,8 +31,12 @@ from .wire import JSON, MSGPACK, dumps, loads, media_type
 
 # The frame's arrays (DESIGN section 3), generated from lightsched.fields: this package
 # does not import lightsched (numba is heavy).
-FIELDS: tuple[dict[str, Any], ...] = tuple(json.loads(
-    resources.files(__package__).joinpath("frame_fields.json").read_text("utf-8"))["fields"])
+_FIELD_LIST = json.loads(
+    resources.files(__package__).joinpath("frame_fields.json").read_text("utf-8"))
+FIELDS: tuple[dict[str, Any], ...] = tuple(_FIELD_LIST["fields"])
+# explain's columns (DESIGN section 7) and its reasons, in their order.
+EXPLAIN_FIELDS: tuple[str, ...] = tuple(f["name"] for f in _FIELD_LIST["explain_fields"])
+REASONS: tuple[str, ...] = tuple(_FIELD_LIST["reasons"])
 FRAME_FIELDS: tuple[str, ...] = tuple(f["name"] for f in FIELDS)
 # Per-object arrays and their empty-slot value (DESIGN section 3).
 PER_OBJECT: dict[str, Any] = {f["name"]: f["empty"] for f in FIELDS if f["per_object"]}
@@ -46,6 +50,18 @@ Frame = make_dataclass(
 Frame.__module__ = __name__
 Frame.__doc__ = """One frame (DESIGN section 3): the arrays asked for (others None), stats, and
 the session's frame index. Its array fields are FRAME_FIELDS."""
+
+Explanation = make_dataclass(
+    "Explanation", [("object_id", int), ("frame_index", int)]
+    + [(name, Any) for name in EXPLAIN_FIELDS])
+Explanation.__module__ = __name__
+Explanation.__doc__ = """lightsched.Scheduler.explain's answer: one row per light, in ascending
+light id; its columns are EXPLAIN_FIELDS (arrays, and ``reason`` a list of REASONS)."""
+
+
+def explanation_of(doc: dict[str, Any]) -> Any:
+    return Explanation(**{name: doc[name] for name in ("object_id", "frame_index",
+                                                       *EXPLAIN_FIELDS)})
 
 
 class RemoteError(Exception):
@@ -333,6 +349,9 @@ class _Session(_Changes):
         self.frame_index = f.frame_index + 1
         return f
 
+    def _explain_path(self, object_id: Any) -> str:
+        return f"/v1/sessions/{self.id}/objects/{object_id}/explain"
+
     def _ws_headers(self) -> dict[str, str] | None:
         key = self.client.api_key
         return {"Authorization": f"Bearer {key}"} if key else None
@@ -383,6 +402,10 @@ class RemoteScheduler(_Session):
             if raw is None:
                 raise _closed(e) from None
         return _stream_answer(raw)
+
+    def explain(self, object_id: int) -> Any:
+        """Why each light is (not) on the object in the last frame (Scheduler.explain)."""
+        return explanation_of(self.client.call("GET", self._explain_path(object_id)))
 
     def info(self) -> dict[str, Any]:
         return self.client.call("GET", f"/v1/sessions/{self.id}")
@@ -467,6 +490,10 @@ class AsyncRemoteScheduler(_Session):
             if raw is None:
                 raise _closed(e) from None
         return _stream_answer(raw)
+
+    async def explain(self, object_id: int) -> Any:
+        async with self._lock:  # after the frames sent before it
+            return explanation_of(await self.client.call("GET", self._explain_path(object_id)))
 
     async def close(self, delete: bool = True) -> None:
         if self._ws is not None:

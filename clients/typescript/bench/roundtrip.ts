@@ -1,10 +1,12 @@
 // One client's side of bench/clients.py: a session of the scene in SCENE (a msgpack map of
 // arrays that bench/clients.py writes), then frames in which every light moves, each timed
 // from the updateLights call to the decoded frame. Prints {"ms": [...]} on stdout.
-//   node --experimental-websocket dist/bench/roundtrip.js URL SCENE [stream]
+//   node --experimental-websocket dist/bench/roundtrip.js URL SCENE [http|node|stream]
+// (http: the global fetch; node: lightsched/node's nodeFetch; stream: the WebSocket).
 import { readFileSync } from "node:fs";
 
 import { Client, MSGPACK, NdArray, decode, type Camera, type Fields } from "../src/index.js";
+import { nodeFetch } from "../src/node.js";
 
 const [url, path, transport] = process.argv.slice(2);
 const scene = decode(new Uint8Array(readFileSync(path)), MSGPACK) as Record<string, NdArray>;
@@ -25,7 +27,7 @@ const frames = Number((scene.frames.data as BigInt64Array)[0]);
 const k = Number((scene.max_lights.data as BigInt64Array)[0]);
 const [poses, l] = positions.shape;
 
-const client = new Client(url);
+const client = new Client(url, transport === "node" ? { fetch: nodeFetch() } : {});
 const s = await client.session({ max_lights: k }, { stream: transport === "stream" });
 s.setLights(lights);
 s.setObjects(objects);

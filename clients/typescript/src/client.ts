@@ -7,7 +7,7 @@
  * ClientOptions.WebSocket).
  */
 
-import { FRAME_FIELDS, type FieldName, type FrameArrays } from "./fields.js";
+import { FRAME_FIELDS, type Explanation, type FieldName, type FrameArrays } from "./fields.js";
 import {
   ARRAY_OF, JSON_TYPE, MSGPACK, NdArray, decode, encode, mediaType,
   type Encoding, type TypedArray,
@@ -47,12 +47,27 @@ export interface FrameOptions {
   stats?: boolean;
 }
 
+/** What a Client needs of its HTTP transport: globalThis.fetch fits, and so does
+ * nodeFetch() of lightsched/node. */
+export type FetchLike = (url: string, init: {
+  method: string; headers: Record<string, string>; body?: Uint8Array;
+}) => Promise<ResponseLike>;
+
+export interface ResponseLike {
+  ok: boolean;
+  status: number;
+  statusText: string;
+  headers: { get(name: string): string | null };
+  arrayBuffer(): Promise<ArrayBuffer>;
+}
+
 export interface ClientOptions {
   /** Sent as ``Authorization: Bearer <key>``; streams use a ticket made with it. */
   apiKey?: string;
   /** The body encoding: msgpack (default) or JSON. */
   encoding?: Encoding;
-  fetch?: typeof fetch;
+  /** The HTTP transport (default: the global fetch). */
+  fetch?: FetchLike;
   WebSocket?: typeof WebSocket;
 }
 
@@ -189,14 +204,14 @@ export class Client {
   readonly url: string;
   readonly apiKey?: string;
   readonly encoding: Encoding;
-  readonly fetch: typeof fetch;
+  readonly fetch: FetchLike;
   readonly WebSocket?: typeof WebSocket;
 
   constructor(url: string, options: ClientOptions = {}) {
     this.url = url.replace(/\/+$/, "");
     this.apiKey = options.apiKey;
     this.encoding = options.encoding ?? MSGPACK;
-    this.fetch = options.fetch ?? globalThis.fetch.bind(globalThis);
+    this.fetch = options.fetch ?? (globalThis.fetch.bind(globalThis) as unknown as FetchLike);
     this.WebSocket = options.WebSocket ?? globalThis.WebSocket;
   }
 
@@ -206,7 +221,7 @@ export class Client {
     if (doc !== undefined) headers["Content-Type"] = this.encoding;
     if (this.apiKey) headers.Authorization = `Bearer ${this.apiKey}`;
     const response = await this.fetch(this.url + path, {
-      method, headers, body: doc === undefined ? undefined : (encode(doc, this.encoding) as BodyInit),
+      method, headers, body: doc === undefined ? undefined : encode(doc, this.encoding),
     });
     const body = new Uint8Array(await response.arrayBuffer());
     const kind = mediaType(response.headers.get("content-type"));
@@ -365,6 +380,15 @@ export class Session {
     const opening = this.opening;
     opening.finally(() => { if (this.opening === opening) this.opening = undefined; }).catch(() => undefined);
     return opening;
+  }
+
+  /** Why each light is (not) on object ``objectId`` in the last frame (Scheduler.explain),
+   * asked after the frames already sent. */
+  explain(objectId: number): Promise<Explanation> {
+    const run = this.queue.then(() => this.client.call(
+      "GET", `/v1/sessions/${this.id}/objects/${objectId}/explain`) as Promise<Explanation>);
+    this.queue = run.catch(() => undefined);
+    return run;
   }
 
   /** A one-use ticket that opens this session's stream without the key. */

@@ -92,3 +92,34 @@ export interface FrameArrays {
   /** per caster: the views it is drawn into (point: cube faces; spot: bit 0; directional: bit camera * C + cascade) (uint32 [M]) */
   caster_masks?: NdArray<Uint32Array>;
 }
+
+// Scheduler.explain (DESIGN section 7): its reasons, in their order, and its columns.
+export const REASONS = ["removed", "object_not_visible", "light_not_visible", "masked", "unshadowed_skip", "out_of_range", "outside_cone", "directional", "selected", "waiting", "fading_out", "below_k"] as const;
+
+export type Reason = (typeof REASONS)[number];
+
+export const EXPLAIN_FIELDS = ["light_id", "priority", "selection_priority", "d2", "slot", "fade_weight", "fade_state", "reason"] as const;
+
+/** One row per light that was visible, held a slot of the object or held one when the last frame
+ * began, in ascending light id; NaN or -1 where a value does not exist. */
+export interface Explanation {
+  object_id: number;
+  /** the frame explained */
+  frame_index: number;
+  /** the light */
+  light_id: NdArray<Int32Array>;
+  /** P of the pair when the light affects the object (directional lights: i + p_user) */
+  priority: NdArray<Float64Array>;
+  /** P with the hysteresis bonus when the light was selected last frame: the key selection compared */
+  selection_priority: NdArray<Float64Array>;
+  /** squared distance from the light to the object's box (point and spot lights) */
+  d2: NdArray<Float64Array>;
+  /** the light's slot in the object's row this frame */
+  slot: NdArray<Int32Array>;
+  /** that slot's fade weight */
+  fade_weight: NdArray<Float64Array>;
+  /** that slot's state: 1 fading in, 2 on, 3 fading out */
+  fade_state: NdArray<Int32Array>;
+  /** the first reason that applies, one of removed, object_not_visible, light_not_visible, masked, unshadowed_skip, out_of_range, outside_cone, directional, selected, waiting, fading_out, below_k */
+  reason: Reason[];
+}

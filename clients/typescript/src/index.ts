@@ -1,9 +1,12 @@
 export {
   Client, Session, RemoteError, ValidationError, cameraDoc, mergeChanged,
-  type ArrayInput, type Camera, type ClientOptions, type Fields, type Frame, type FrameOptions,
-  type Problem, type Vector,
+  type ArrayInput, type Camera, type ClientOptions, type FetchLike, type Fields, type Frame,
+  type FrameOptions, type Problem, type ResponseLike, type Vector,
 } from "./client.js";
-export { FRAME_FIELDS, type FieldName, type FrameArrays, type FrameField } from "./fields.js";
+export {
+  EXPLAIN_FIELDS, FRAME_FIELDS, REASONS, type Explanation, type FieldName, type FrameArrays,
+  type FrameField, type Reason,
+} from "./fields.js";
 export {
   ARRAY_OF, JSON_TYPE, MSGPACK, NdArray, WireError, decode, encode, fromWire, mediaType, ndarray,
   vectors, type DType, type Encoding, type TypedArray,

@@ -8,8 +8,9 @@ import { after, before, describe, test } from "node:test";
 
 import {
   Client, JSON_TYPE, MSGPACK, NdArray, RemoteError, fromWire,
-  type Camera, type Encoding, type Fields, type Frame, type Session,
+  type Camera, type Encoding, type Explanation, type FetchLike, type Fields, type Frame, type Session,
 } from "../src/index.js";
+import { nodeFetch } from "../src/node.js";
 import { KEY, REPO, startServer, type LiveServer } from "./server.js";
 
 const SUITE = resolve(REPO, "schemas/conformance");
@@ -38,9 +39,23 @@ function checkFrame(frame: Frame, expect: any, where: string): void {
   }
 }
 
-async function outcome(call: () => Promise<Frame>, step: any, where: string): Promise<void> {
+function checkExplanation(e: Explanation, expect: any, where: string): void {
+  for (const [name, want] of Object.entries(expect as Record<string, unknown>)) {
+    const got = (e as unknown as Record<string, unknown>)[name];
+    if (want instanceof NdArray) {
+      assert.ok(got instanceof NdArray, `${where}: ${name} missing`);
+      assert.equal(got.dtype, want.dtype, `${where}: ${name} dtype`);
+      assert.ok(Buffer.from(bytes(got)).equals(Buffer.from(bytes(want))), `${where}: ${name} differs`);
+    } else {
+      assert.deepEqual(got, want, `${where}: ${name}`);
+    }
+  }
+}
+
+async function outcome<T>(call: () => Promise<T>, step: any, where: string,
+                          check: (got: T, expect: any, where: string) => void): Promise<void> {
   if (step.expect) {
-    checkFrame(await call(), step.expect, where);
+    check(await call(), step.expect, where);
     return;
   }
   await assert.rejects(call, (e: unknown) => {
@@ -64,10 +79,12 @@ export async function runScenario(doc: any, client: Client, stream: boolean): Pr
     } else if (step.call === "frame") {
       await outcome(() => session!.frame(step.cameras as Camera[], {
         dt: step.dt, cut: step.cut, outputs: step.outputs ?? undefined, changedOnly: step.changed_only,
-      }), step, where);
+      }), step, where, checkFrame);
+    } else if (step.call === "explain") {
+      await outcome(() => session!.explain(step.object_id), step, where, checkExplanation);
     } else if (step.call === "schedule") {
       await outcome(() => client.schedule(step.lights, step.objects, step.cameras, step.config,
-        step.outputs), step, where);
+        step.outputs), step, where, checkFrame);
     } else if (step.call === "info") {
       const info = await session!.info();
       for (const [k, v] of Object.entries(step.expect)) assert.equal(info[k], v, `${where}: ${k}`);
@@ -87,15 +104,17 @@ describe("conformance suite", () => {
   test("the suite is there", () => {
     assert.ok(FILES.length >= 3, `scenarios in ${SUITE}`);
   });
-  const modes: [string, Encoding, boolean][] = [
-    ["http msgpack", MSGPACK, false], ["http json", JSON_TYPE, false],
-    ["stream msgpack", MSGPACK, true], ["stream json", JSON_TYPE, true],
+  const modes: [string, Encoding, boolean, FetchLike | undefined][] = [
+    ["http msgpack", MSGPACK, false, undefined], ["http json", JSON_TYPE, false, undefined],
+    ["http msgpack (lightsched/node)", MSGPACK, false, nodeFetch()],
+    ["http json (lightsched/node)", JSON_TYPE, false, nodeFetch()],
+    ["stream msgpack", MSGPACK, true, undefined], ["stream json", JSON_TYPE, true, undefined],
   ];
   for (const file of FILES) {
-    for (const [mode, encoding, stream] of modes) {
+    for (const [mode, encoding, stream, fetch] of modes) {
       test(`${file} over ${mode}`, async () => {
         const doc = JSON.parse(readFileSync(resolve(SUITE, file), "utf8"));
-        await runScenario(doc, new Client(server.url, { apiKey: KEY, encoding }), stream);
+        await runScenario(doc, new Client(server.url, { apiKey: KEY, encoding, fetch }), stream);
       });
     }
   }

@@ -16,20 +16,6 @@ import { FRAME_FIELDS, type FieldName } from "../src/fields.js";
 import { LightTable, ScheduledInstances, scheduleMaterial } from "../src/three.js";
 import { MSGPACK, NdArray, decode, vectors } from "../src/wire.js";
 
-/** Session.explain's answer (issue 51: one row per light, ascending light id). */
-interface Explanation {
-  frame_index: number;
-  object_id: number;
-  light_id: NdArray<Int32Array>;
-  priority: NdArray<Float64Array>;
-  selection_priority: NdArray<Float64Array>;
-  d2: NdArray<Float64Array>;
-  slot: NdArray<Int32Array>;
-  fade_weight: NdArray<Float64Array>;
-  fade_state: NdArray<Int32Array>;
-  reason: string[];
-}
-
 interface City {
   lights: Record<string, NdArray>;
   objects: Record<string, NdArray>;
@@ -417,20 +403,13 @@ function showStats(): void {
   </table>`;
 }
 
-async function explain(s: Session, objectId: number): Promise<Explanation> {
-  // Session.explain arrives with issue 51's explain; until then the panel says so.
-  const method = (s as unknown as { explain?: (id: number) => Promise<Explanation> }).explain;
-  if (typeof method !== "function") throw new Error("this client has no Session.explain yet");
-  return method.call(s, objectId);
-}
-
 async function showExplain(instance: number): Promise<void> {
   const panel = $("explain");
   const objectId = instances!.objectId(instance);
   panel.style.display = "block";
   panel.innerHTML = `<h1>object ${objectId}</h1>explaining…`;
   try {
-    const e = await explain(session!, objectId);
+    const e = await session!.explain(objectId);
     const rows = e.reason.map((reason, i) => {
       const num = (v: number, digits = 3) => Number.isNaN(v) ? "–" : v.toPrecision(digits);
       return `<tr class="${reason}"><td>${e.light_id.data[i]}</td><td class="reason">${reason}</td>`

@@ -71,6 +71,21 @@ struct Frame {
   }
 };
 
+// Scheduler.explain's answer (DESIGN section 7): one row per light, in ascending light id.
+// columns: light_id, priority, selection_priority, d2, slot, fade_weight, fade_state (the
+// EXPLAIN_FIELDS of schemas/frame_fields.json; NaN or -1 where a value does not exist);
+// reason: the first reason that applies to each row.
+struct Explanation {
+  std::int64_t object_id = 0;
+  std::int64_t frame_index = 0;
+  std::map<std::string, Array> columns;
+  std::vector<std::string> reason;
+  const Array* get(const std::string& name) const {
+    auto it = columns.find(name);
+    return it == columns.end() ? nullptr : &it->second;
+  }
+};
+
 struct FrameOptions {
   double dt = 1.0 / 60.0;
   bool cut = false;
@@ -140,6 +155,8 @@ class Session {
   // The held changes, then one frame (the changes are sent either way: a refused frame
   // changes nothing in the session).
   Frame frame(const std::vector<Camera>& cameras, const FrameOptions& options = {});
+  // Why each light is (not) on the object in the last frame.
+  Explanation explain(std::int64_t object_id);
   // frame_index, lights and objects of the session.
   std::map<std::string, std::int64_t> info();
   // Deletes the session.
@@ -194,6 +211,7 @@ struct Answer {
   Array rows;
 };
 Answer decode_frame(const std::string& msgpack_bytes);
+Explanation decode_explanation(const std::string& msgpack_bytes);
 // A msgpack map of array maps into Arrays by key (other values are skipped).
 std::map<std::string, Array> decode_arrays(const std::string& msgpack_bytes);
 
