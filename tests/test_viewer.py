@@ -6,7 +6,8 @@ makes both first. Without them the tests fail, saying which command to run: a sk
 let CI pass without ever having drawn a frame.
 
 Screenshots go to build/screenshots/; with LIGHTSCHED_VIEWER_SCREENSHOT=<path> the lit
-view is also written there (`make viewer-screenshot` writes the README's docs/viewer.png).
+view with a clicked object's explain panel is also written there (`make viewer-screenshot`
+writes the README's docs/viewer.png).
 """
 
 from __future__ import annotations
@@ -157,8 +158,6 @@ def test_viewer_draws_the_city_and_reconfigures_without_recompiling(browser, ser
     assert changed.mean() > 0.002, "the lights moved but the picture stayed the same"
     assert moved["programs"] == programs, "a light set change compiled a shader"
     page.screenshot(path=SCREENSHOTS / "viewer-lit.png")
-    if target := os.environ.get("LIGHTSCHED_VIEWER_SCREENSHOT"):
-        shutil.copyfile(SCREENSHOTS / "viewer-lit.png", REPO / target)
 
     # Each overlay draws something of its own.
     for overlay in ("count", "fade", "shadows"):
@@ -196,7 +195,10 @@ def test_viewer_explains_a_clicked_object(browser, service):
     assert selected, f"object {target['objectId']} holds at least two lights: {explained}"
     for light in selected:
         assert f"{light}\tselected" in panel or f"{light} selected" in panel, panel
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=SCREENSHOTS / "viewer-explain.png")
+    if picture := os.environ.get("LIGHTSCHED_VIEWER_SCREENSHOT"):
+        shutil.copyfile(SCREENSHOTS / "viewer-explain.png", REPO / picture)
     assert errors == []
     page.close()
 

@@ -417,11 +417,16 @@ async function showExplain(instance: number): Promise<void> {
         + `<td>${num(Math.sqrt(e.d2.data[i]))}</td><td>${e.slot.data[i] < 0 ? "–" : e.slot.data[i]}</td>`
         + `<td>${num(e.fade_weight.data[i], 2)}</td></tr>`;
     });
-    const shown = e.reason.map((r, i) => [r, i] as const).filter(([r]) => r !== "light_not_visible");
+    // The lights that hold or compete for the object's slots first (by P), then the rest
+    // by reason; lights out of range or out of view are only counted.
+    const rank = (r: string) => ["selected", "fading_out", "waiting", "below_k", "directional"].indexOf(r) >>> 0;
+    const counted = ["out_of_range", "light_not_visible"];
+    const shown = e.reason.map((r, i) => i).filter((i) => !counted.includes(e.reason[i]))
+      .sort((a, b) => rank(e.reason[a]) - rank(e.reason[b]) || (e.priority.data[b] || 0) - (e.priority.data[a] || 0));
+    const tally = counted.map((r) => `${e.reason.filter((x) => x === r).length} ${r}`).join(", ");
     panel.innerHTML = `<h1>object ${e.object_id}, frame ${e.frame_index}</h1>`
       + `<table><tr><th>light</th><th>reason</th><th>P</th><th>P + hyst.</th><th>distance</th><th>slot</th><th>weight</th></tr>`
-      + shown.map(([, i]) => rows[i]).join("") + `</table>`
-      + `<div>${e.reason.length - shown.length} lights out of view not listed</div>`;
+      + shown.map((i) => rows[i]).join("") + `</table><div>and ${tally}</div>`;
     stats.explained = { object_id: e.object_id, light_id: [...e.light_id.data], reason: e.reason };
   } catch (err) {
     panel.innerHTML = `<h1>object ${objectId}</h1><div id="explain-error">explain failed: ${(err as Error).message}</div>`;
