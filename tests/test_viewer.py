@@ -203,6 +203,76 @@ def test_viewer_explains_a_clicked_object(browser, service):
     page.close()
 
 
+# One box (-1..1) facing a camera on +z, white Lambert, linear output: the centre pixel is
+# the face centre's diffuse light, so the shader's numbers can be checked against DESIGN
+# section 2's formulas. Each case is a new frame of the same instances and material.
+SHADER_CASES = """async () => {
+  const L = await import("/viewer/lightsched-three.js");
+  const canvas = document.createElement("canvas");
+  canvas.width = canvas.height = 64;
+  document.body.append(canvas);
+  const renderer = new L.WebGLRenderer({ canvas, preserveDrawingBuffer: true });
+  renderer.outputColorSpace = L.LinearSRGBColorSpace;
+  const table = new L.LightTable();
+  // Light 4: a point 2 m in front of the face, radius 10. Light 9: a directional light
+  // travelling towards -z, intensity 0.5.
+  table.set({ id: [9, 4], type: [2, 0], position: [0, 0, 0, 0, 0, 3], radius: [1, 10],
+              direction: [0, 0, -1, 0, -1, 0], intensity: [0.5, 1] });
+  const { material, uniforms } = L.scheduleMaterial(new L.MeshLambertMaterial({ color: 0xffffff }),
+    table, { maxLights: 2 });
+  const objects = new L.ScheduledInstances({ id: [1], bounds_min: [-1, -1, -1], bounds_max: [1, 1, 1] },
+    material, uniforms, 2);
+  const scene = new L.Scene();
+  scene.add(objects.mesh);
+  const camera = new L.PerspectiveCamera(30, 1, 0.1, 100);
+  camera.position.set(0, 0, 5);
+  camera.lookAt(0, 0, 0);
+  const nd = (dtype, shape, data) => new L.NdArray(dtype, shape, data);
+  const centre = (lightIndex, fadeWeight, directional, residual) => {
+    objects.applyFrame({ frame_index: 0, stats: {}, object_id: nd("int32", [1], Int32Array.of(1)),
+      light_index: nd("int32", [1, 2], Int32Array.from(lightIndex)),
+      fade_weight: nd("float32", [1, 2], Float32Array.from(fadeWeight)),
+      directional_lights: nd("int32", [directional.length], Int32Array.from(directional)),
+      ...(residual ? { residual: nd("float32", [1, 4], Float32Array.from(residual)) } : {}) }, table);
+    renderer.render(scene, camera);
+    const gl = renderer.getContext();
+    const pixel = new Uint8Array(4);
+    gl.readPixels(32, 32, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    return pixel[0];
+  };
+  // light_index counts rows of the lights in ascending id: row 0 is light 4, row 1 light 9;
+  // directional_lights names ids.
+  return {
+    slot: centre([0, -1], [1, 0], []),
+    halfFaded: centre([-1, 0], [0, 0.5], []),
+    directionalInSlot: centre([1, -1], [1, 0], []),
+    empty: centre([-1, -1], [0, 0], []),
+    directional: centre([-1, -1], [0, 0], [9]),
+    residual: centre([-1, -1], [0, 0], [], [1, 0, 0, 0.5]),
+    residualGone: centre([-1, -1], [0, 0], []),
+    programs: renderer.info.programs.length,
+  };
+}"""
+
+
+def test_the_shader_lights_each_instance_by_its_slots(browser, service):
+    page = browser.new_page()
+    page.goto(f"{service}/healthz")  # any page of the service's origin, to import from
+    got = page.evaluate(SHADER_CASES)
+    page.close()
+    # Light 4 at d2 = 4 from the face centre: i * w^2 / (d2 + r0^2), w = 1 - (d2 / r^2)^2;
+    # three's Lambert divides by pi what the table multiplied by pi.
+    w = 1 - (4 / 100) ** 2
+    point = w * w / (4 + 0.01)
+    expected = {"slot": point, "halfFaded": 0.5 * point, "empty": 0.0,
+                "directionalInSlot": 0.5, "directional": 0.5,  # i, facing the light
+                "residual": 1 / 4 + 0.5 / 2,  # a/4 + (b . n)/2, n = +z
+                "residualGone": 0.0}
+    for case, value in expected.items():
+        assert abs(got[case] - 255 * value) <= 2, (case, got, 255 * value)
+    assert got["programs"] == 1, "a new frame compiled a program"
+
+
 # The page of another origin: the TypeScript client (the viewer build's lightsched.js)
 # makes a session with a key, and streams frames (so a ticket, as a browser WebSocket
 # cannot send the key).

@@ -386,6 +386,10 @@ export class ScheduledInstances {
     if (frame.residual) {
       this.residual.array = frame.residual.data;
       this.residual.needsUpdate = true;
+    } else if (this.residual.array.some((v) => v !== 0)) {
+      // A frame without one (residual off, or not asked for) adds none.
+      this.residual.array = new Float32Array(this.residual.array.length);
+      this.residual.needsUpdate = true;
     }
     const rows = frame.directional_lights?.data ?? new Int32Array(0);
     const slots = this.uniforms.directionalRows.value;
