@@ -214,10 +214,13 @@ SHADER_CASES = """async () => {
   const renderer = new L.WebGLRenderer({ canvas, preserveDrawingBuffer: true });
   renderer.outputColorSpace = L.LinearSRGBColorSpace;
   const table = new L.LightTable();
-  // Light 4: a point 2 m in front of the face, radius 10. Light 9: a directional light
-  // travelling towards -z, intensity 0.5.
-  table.set({ id: [9, 4], type: [2, 0], position: [0, 0, 0, 0, 0, 3], radius: [1, 10],
-              direction: [0, 0, -1, 0, -1, 0], intensity: [0.5, 1] });
+  // Light 4: a point 2 m in front of the face, radius 10. Lights 6 and 7: spots there
+  // too, 6 aimed at the face, 7 sideways. Light 9: a directional light travelling towards
+  // -z, intensity 0.5.
+  table.set({ id: [9, 4, 6, 7], type: [2, 0, 1, 1],
+              position: [0, 0, 0, 0, 0, 3, 0, 0, 3, 0, 0, 3], radius: [1, 10, 10, 10],
+              direction: [0, 0, -1, 0, -1, 0, 0, 0, -1, 1, 0, 0], outer_angle: [0.5, 0.5, 0.5, 0.5],
+              intensity: [0.5, 1, 1, 1] });
   const { material, uniforms } = L.scheduleMaterial(new L.MeshLambertMaterial({ color: 0xffffff }),
     table, { maxLights: 2 });
   const objects = new L.ScheduledInstances({ id: [1], bounds_min: [-1, -1, -1], bounds_max: [1, 1, 1] },
@@ -240,12 +243,14 @@ SHADER_CASES = """async () => {
     gl.readPixels(32, 32, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
     return pixel[0];
   };
-  // light_index counts rows of the lights in ascending id: row 0 is light 4, row 1 light 9;
+  // light_index counts rows of the lights in ascending id: rows 0..3 are lights 4, 6, 7, 9;
   // directional_lights names ids.
   return {
     slot: centre([0, -1], [1, 0], []),
     halfFaded: centre([-1, 0], [0, 0.5], []),
-    directionalInSlot: centre([1, -1], [1, 0], []),
+    directionalInSlot: centre([3, -1], [1, 0], []),
+    spotAimed: centre([1, -1], [1, 0], []),
+    spotAside: centre([2, -1], [1, 0], []),
     empty: centre([-1, -1], [0, 0], []),
     directional: centre([-1, -1], [0, 0], [9]),
     residual: centre([-1, -1], [0, 0], [], [1, 0, 0, 0.5]),
@@ -265,6 +270,7 @@ def test_the_shader_lights_each_instance_by_its_slots(browser, service):
     w = 1 - (4 / 100) ** 2
     point = w * w / (4 + 0.01)
     expected = {"slot": point, "halfFaded": 0.5 * point, "empty": 0.0,
+                "spotAimed": point, "spotAside": 0.0,  # spot factor 1 on the axis, 0 outside
                 "directionalInSlot": 0.5, "directional": 0.5,  # i, facing the light
                 "residual": 1 / 4 + 0.5 / 2,  # a/4 + (b . n)/2, n = +z
                 "residualGone": 0.0}
