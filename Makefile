@@ -11,7 +11,7 @@ TS_STAMP := $(TS)/node_modules/.installed
 CPP := clients/cpp
 CPP_BUILD := build/cpp
 # Debian's packages the C++ client builds with.
-CPP_DEBS := libmsgpack-cxx-dev libcpp-httplib-dev nlohmann-json3-dev pkg-config
+CPP_DEBS := libmsgpack-cxx-dev libcpp-httplib-dev nlohmann-json3-dev libboost-dev pkg-config
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: test test-quick test-ts test-cpp cpp-deps viewer browser-deps test-browser viewer-screenshot \

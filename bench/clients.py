@@ -96,7 +96,7 @@ def run_python(url: str, scene_path: str, transport: str = "http") -> None:
 
 
 def commands(url: str, scene: Path) -> dict[tuple[str, str], list[str]]:
-    """(client, transport) -> its command; the C++ client has no stream. The TypeScript
+    """(client, transport) -> its command. The TypeScript
     client's HTTP runs twice: through the global fetch (what a browser uses) and through
     lightsched/node's nodeFetch (node:http, what a Node program should use)."""
     ts = ["node", "--experimental-websocket", str(TS / "dist" / "bench" / "roundtrip.js"),
@@ -105,7 +105,8 @@ def commands(url: str, scene: Path) -> dict[tuple[str, str], list[str]]:
     return {("Python", "HTTP"): [*py, "http"],
             ("TypeScript (Node)", "HTTP (fetch)"): [*ts, "http"],
             ("TypeScript (Node)", "HTTP (lightsched/node)"): [*ts, "node"],
-            ("C++", "HTTP"): [str(CPP_BUILD / "bench_roundtrip"), url, str(scene)],
+            ("C++", "HTTP"): [str(CPP_BUILD / "bench_roundtrip"), url, str(scene), "http"],
+            ("C++", "WebSocket"): [str(CPP_BUILD / "bench_roundtrip"), url, str(scene), "stream"],
             ("Python", "WebSocket"): [*py, "stream"],
             ("TypeScript (Node)", "WebSocket"): [*ts, "stream"]}
 

@@ -5,6 +5,7 @@ paths of the fast scheduler (brute force and grid), and an animated small city."
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -378,24 +379,37 @@ def step_scene(data, t: Twin, lights: dict, objects: dict, used_l: set, used_o: 
             t.update_objects(id=np.array(ids), bounds_min=np.array(lo), bounds_max=np.array(hi))
 
 
-@examples(2.0)
-@given(sc=scenes(), data=st.data())
-def test_sequence_matches_oracle(sc, data, tuning):
+def run_sequence(sc: dict[str, Any], data: Any, tuning: Any, frames: tuple[int, int],
+                 check: Callable[[Twin, str], None] | None = None) -> Twin:
+    """A random sequence of scene changes, camera moves, dts and cuts on a Twin (which
+    compares every frame); ``check(twin, what)`` also runs after each frame and after each
+    frame's scene changes."""
     t = Twin(sc["config"], tuning=tuning)
     lights, objects = dict(sc["lights"]), dict(sc["objects"])
     used_l, used_o = set(lights), set(objects)
     t.set_lights(**as_kwargs(lights))
     t.set_objects(**as_kwargs(objects, kind="objects"))
     cams = sc["cameras"]
-    n_frames = data.draw(st.integers(3, 8), label="frames")
+    n_frames = data.draw(st.integers(*frames), label="frames")
     for i in range(n_frames):
         if i:
             step_scene(data, t, lights, objects, used_l, used_o)
+            if check is not None:
+                check(t, f"after frame {i - 1} and a scene change")
             if data.draw(st.integers(0, 3), label="camera move") == 0:
                 cams = data.draw(camera_list(), label="cameras")
         dt = data.draw(st.sampled_from(DTS), label="dt")
         cut = data.draw(st.integers(0, 5), label="cut") == 0
         t.frame(cams, dt=dt, cut=cut)
+        if check is not None:
+            check(t, f"frame {i}")
+    return t
+
+
+@examples(2.0)
+@given(sc=scenes(), data=st.data())
+def test_sequence_matches_oracle(sc, data, tuning):
+    t = run_sequence(sc, data, tuning, (3, 8))
     assert not any(p.startswith("grid") for p in t.plans), t.plans
 
 

@@ -1,7 +1,13 @@
-// The C++ client: msgpack-cxx for the wire (schemas/wire.md), cpp-httplib for HTTP.
+// The C++ client: msgpack-cxx for the wire (schemas/wire.md), cpp-httplib for HTTP,
+// Boost.Beast for the WebSocket stream.
 #include "lightsched/client.hpp"
 
 #include <httplib.h>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/websocket.hpp>
 
 #include <algorithm>
 #include <msgpack.hpp>
@@ -321,7 +327,7 @@ struct Client::Http {
 };
 
 Client::Client(const std::string& url, std::string api_key)
-    : http_(std::make_unique<Http>(url)), api_key_(std::move(api_key)) {}
+    : http_(std::make_unique<Http>(url)), url_(url), api_key_(std::move(api_key)) {}
 
 Client::~Client() = default;
 
@@ -347,7 +353,7 @@ std::string Client::call(const std::string& method, const std::string& path, con
   return r.body;
 }
 
-Session Client::session(const Config& config) {
+Session Client::session(const Config& config, bool stream) {
   msgpack::sbuffer buf;
   Packer pk(&buf);
   pk.pack_map(1);
@@ -358,7 +364,7 @@ Session Client::session(const Config& config) {
   const auto* id = find(handle.get(), "id");
   const auto* index = find(handle.get(), "frame_index");
   if (!id || !index) throw std::runtime_error("malformed answer: no session id");
-  return Session(this, key_of(*id), as_int(*index));
+  return Session(this, key_of(*id), as_int(*index), stream);
 }
 
 Frame Client::schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
@@ -416,7 +422,9 @@ Frame Session::frame(const std::vector<Camera>& cameras, const FrameOptions& opt
     pack_str(pk, "stats");
     pk.pack_false();
   }
-  auto answer = decode_frame(client_->call("POST", "/v1/sessions/" + id_ + "/frames", std::string(buf.data(), buf.size())));
+  const std::string request(buf.data(), buf.size());
+  auto answer = decode_frame(stream_ ? stream_call(request)
+                                     : client_->call("POST", "/v1/sessions/" + id_ + "/frames", request));
   Frame f = answer.changed_only ? merge_changed(last_ ? &*last_ : nullptr, answer.frame, answer.rows, answer.has_object_id)
                                 : std::move(answer.frame);
   last_ = f;
@@ -439,6 +447,67 @@ Explanation Session::explain(std::int64_t object_id) {
       client_->call("GET", "/v1/sessions/" + id_ + "/objects/" + std::to_string(object_id) + "/explain", ""));
 }
 
-void Session::close() { client_->call("DELETE", "/v1/sessions/" + id_, ""); }
+namespace beast = boost::beast;
+namespace websocket = boost::beast::websocket;
+using tcp = boost::asio::ip::tcp;
+
+struct Session::Stream {
+  boost::asio::io_context ioc;
+  websocket::stream<tcp::socket> ws{ioc};
+  beast::flat_buffer buffer;
+};
+
+std::string Session::stream_call(const std::string& request) {
+  try {
+    if (!ws_) {
+      // url_ is "http://host:port" (or https, which this stream does not speak).
+      const std::string& url = client_->url_;
+      const auto scheme_end = url.find("://");
+      const std::string rest = scheme_end == std::string::npos ? url : url.substr(scheme_end + 3);
+      const std::string authority = rest.substr(0, rest.find('/'));
+      const auto colon = authority.rfind(':');
+      const std::string host = colon == std::string::npos ? authority : authority.substr(0, colon);
+      const std::string port = colon == std::string::npos ? "80" : authority.substr(colon + 1);
+      auto s = std::make_shared<Stream>();
+      tcp::resolver resolver(s->ioc);
+      boost::asio::connect(s->ws.next_layer(), resolver.resolve(host, port));
+      s->ws.next_layer().set_option(tcp::no_delay(true));  // one small message each way
+      s->ws.read_message_max(0);  // the service's limit applies, not Beast's 16 MB default
+      const std::string key = client_->api_key_;
+      s->ws.set_option(websocket::stream_base::decorator([key](websocket::request_type& req) {
+        if (!key.empty()) req.set(beast::http::field::authorization, "Bearer " + key);
+      }));
+      s->ws.handshake(authority, "/v1/sessions/" + id_ + "/stream");
+      s->ws.binary(true);
+      ws_ = std::move(s);
+    }
+    ws_->ws.write(boost::asio::buffer(request));
+    ws_->buffer.clear();
+    ws_->ws.read(ws_->buffer);
+  } catch (const boost::system::system_error& e) {
+    // A refused handshake or a closed stream (1009: a message over the service's limit).
+    const bool too_big = ws_ && ws_->ws.reason().code == websocket::close_code::too_big;
+    const std::string reason = ws_ ? std::string(ws_->ws.reason().reason.c_str()) : "";
+    ws_.reset();
+    const int status = too_big ? 413 : 400;
+    throw RemoteError(status, "", "Stream closed", "the stream failed: " + std::string(e.what()) +
+                                                       (reason.empty() ? "" : " (" + reason + ")"),
+                      std::nullopt, std::nullopt, std::nullopt);
+  }
+  std::string answer = beast::buffers_to_string(ws_->buffer.data());
+  // A problem document instead of a frame (a refusal, or a handshake the service refused).
+  auto handle = msgpack::unpack(answer.data(), answer.size());
+  if (!find(handle.get(), "frame_index")) raise_problem(400, answer);
+  return answer;
+}
+
+void Session::close() {
+  if (ws_) {
+    boost::system::error_code ignored;
+    ws_->ws.close(websocket::close_code::normal, ignored);
+    ws_.reset();
+  }
+  client_->call("DELETE", "/v1/sessions/" + id_, "");
+}
 
 }  // namespace lightsched

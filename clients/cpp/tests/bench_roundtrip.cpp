@@ -1,7 +1,7 @@
 // One client's side of bench/clients.py: a session of the scene in SCENE (a msgpack map of
 // arrays that bench/clients.py writes), then frames in which every light moves, each timed
 // from the update_lights call to the decoded frame. Prints {"ms": [...]} on stdout.
-//   bench_roundtrip URL SCENE
+//   bench_roundtrip URL SCENE [http|stream]
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -13,10 +13,11 @@
 using namespace lightsched;
 
 int main(int argc, char** argv) {
-  if (argc != 3) {
-    std::cerr << "usage: bench_roundtrip URL SCENE\n";
+  if (argc != 3 && argc != 4) {
+    std::cerr << "usage: bench_roundtrip URL SCENE [http|stream]\n";
     return 2;
   }
+  const bool stream = argc == 4 && std::string(argv[3]) == "stream";
   std::ifstream in(argv[2], std::ios::binary);
   auto scene = decode_arrays(std::string(std::istreambuf_iterator<char>(in), {}));
   Fields lights, objects;
@@ -37,7 +38,7 @@ int main(int argc, char** argv) {
   const std::int64_t poses = positions.shape[0], l = positions.shape[1];
 
   Client client(argv[1]);
-  Session s = client.session({{"max_lights", k}});
+  Session s = client.session({{"max_lights", k}}, stream);
   s.set_lights(lights);
   s.set_objects(objects);
   s.frame({cam});

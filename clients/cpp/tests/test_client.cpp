@@ -224,14 +224,14 @@ void outcome(const std::function<T()>& call, void (*check)(const T&, const json&
   CHECK(false, where << ": no error");
 }
 
-void run_scenario(const json& doc, Client& client) {
+void run_scenario(const json& doc, Client& client, bool stream) {
   std::optional<Session> session;
   int i = 0;
   for (const auto& step : doc.at("steps")) {
     const std::string call = step.at("call");
     const std::string where = doc.at("name").get<std::string>() + " step " + std::to_string(i++) + " (" + call + ")";
     if (call == "session") {
-      session.emplace(client.session(config_of(step.at("config"))));
+      session.emplace(client.session(config_of(step.at("config")), stream));
     } else if (call == "set_lights") {
       session->set_lights(fields_of(step.at("fields")));
     } else if (call == "update_lights") {
@@ -311,9 +311,11 @@ void test_conformance() {
   std::sort(files.begin(), files.end());
   CHECK(files.size() >= 3, "the suite's scenarios");
   for (const auto& p : files) {
-    Client client(server.url, KEY);
-    run_scenario(json::parse(read_file(p)), client);
-    std::cout << "  " << p.filename().string() << ": ok\n";
+    for (bool stream : {false, true}) {
+      Client client(server.url, KEY);
+      run_scenario(json::parse(read_file(p)), client, stream);
+      std::cout << "  " << p.filename().string() << (stream ? " over the stream" : " over HTTP") << ": ok\n";
+    }
   }
 }
 

@@ -159,18 +159,25 @@ class Session {
   Explanation explain(std::int64_t object_id);
   // frame_index, lights and objects of the session.
   std::map<std::string, std::int64_t> info();
-  // Deletes the session.
+  // Closes the stream, if open, and deletes the session.
   void close();
+  // Frames go over the session's WebSocket stream (Boost.Beast) instead of HTTP.
+  bool stream() const { return stream_; }
 
  private:
   friend class Client;
-  Session(Client* client, std::string id, std::int64_t frame_index)
-      : client_(client), id_(std::move(id)), frame_index_(frame_index) {}
+  Session(Client* client, std::string id, std::int64_t frame_index, bool stream)
+      : client_(client), id_(std::move(id)), frame_index_(frame_index), stream_(stream) {}
+  std::string stream_call(const std::string& request);
   Client* client_;
   std::string id_;
   std::int64_t frame_index_;
+  bool stream_;
   std::vector<Change> changes_;
   std::optional<Frame> last_;
+  // The stream, opened by the first frame (copies of a Session share it).
+  struct Stream;
+  std::shared_ptr<Stream> ws_;
 };
 
 class Client {
@@ -181,7 +188,9 @@ class Client {
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;
 
-  Session session(const Config& config = {});
+  // A new session; with stream, its frames go over its WebSocket (one connection, opened
+  // by the first frame; the key is sent in the handshake's Authorization header).
+  Session session(const Config& config = {}, bool stream = false);
   // The stateless one-frame call (lightsched.schedule).
   Frame schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
                  const Config& config = {}, const std::vector<std::string>& outputs = {});
@@ -199,6 +208,7 @@ class Client {
   std::string call(const std::string& method, const std::string& path, const std::string& body);
   struct Http;
   std::unique_ptr<Http> http_;
+  std::string url_;
   std::string api_key_;
 };
 
