@@ -12,10 +12,13 @@ objects and 100 lights, K = 8) to a msgpack file each client's bench program rea
 run is one process of one client: a new session, the scene, one frame, 50 warm-up frames,
 then timed frames in which every light moves (update_lights with new positions, as a game
 sends them), each timed from the update_lights call to the decoded, full frame (all
-outputs, msgpack, one kept-alive connection or the session's stream). Runs are interleaved round by round,
-the client order rotating, and a client's p50 is the median of its runs' p50s; "vs Python"
-is the median over rounds of the difference of the two runs' p50s in that round (paired,
-as bench/paired.py compares).
+outputs, msgpack, one kept-alive connection or the session's stream).
+
+Pairing: this 2-core VM drifts by up to 2x between runs a minute apart, so each case runs
+right beside a run of the Python client on the same target and transport, the two in
+alternating order (ABBA) and the cases rotating round by round. A client's p50 is the
+median of its runs' p50s; "vs Python" is the median over rounds of the difference of the
+two adjacent runs' p50s (paired, as bench/paired.py compares).
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ TS = REPO / "clients" / "typescript"
 CPP_BUILD = REPO / "build" / "cpp"
 BEGIN, END = markers("clients.py")
 N_OBJECTS, N_LIGHTS, K, WARMUP = 1000, 100, 8, 50
+# Issue 50: each client's p50 within this of the Python client's on its best transport.
+TARGET_MS = 0.3
 
 
 def write_scene(path: Path, frames: int) -> None:
@@ -160,29 +165,42 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             scene = Path(tmp) / "scene.msgpack"
             write_scene(scene, args.frames)
-            cases = [(t, *name, cmd) for t, server in servers.items()
-                     for name, cmd in commands(server.url, scene).items()]
+            cmds = {(t, *name): cmd for t, server in servers.items()
+                    for name, cmd in commands(server.url, scene).items()}
+            cases = [key for key in cmds if key[1] != "Python"]
+            paired: dict[tuple[str, str, str], list[float]] = {}
+
+            def run(key: tuple[str, str, str], r: int) -> float:
+                done = subprocess.run(cmds[key], capture_output=True, text=True, check=True)
+                ms = np.array(json.loads(done.stdout.strip().splitlines()[-1])["ms"])
+                p50.setdefault(key, []).append(float(np.median(ms)))
+                p99.setdefault(key, []).append(float(np.percentile(ms, 99)))
+                say(f"round {r + 1} {key[0]} {key[1]} over {key[2]}: p50 {p50[key][-1]:.3f} ms")
+                return p50[key][-1]
+
             for r in range(args.rounds):
-                for target, client, transport, cmd in cases[r % len(cases):] + cases[:r % len(cases)]:
-                    done = subprocess.run(cmd, capture_output=True, text=True, check=True)
-                    ms = np.array(json.loads(done.stdout.strip().splitlines()[-1])["ms"])
-                    key = (target, client, transport)
-                    p50.setdefault(key, []).append(float(np.median(ms)))
-                    p99.setdefault(key, []).append(float(np.percentile(ms, 99)))
-                    say(f"round {r + 1} {target} {client} over {transport}: "
-                        f"p50 {p50[key][-1]:.3f} ms")
+                for i, key in enumerate(cases[r % len(cases):] + cases[:r % len(cases)]):
+                    base = (key[0], "Python", _base(key[2]))
+                    if (r + i) % 2:
+                        own = run(key, r)
+                        theirs = run(base, r)
+                    else:
+                        theirs = run(base, r)
+                        own = run(key, r)
+                    paired.setdefault(key, []).append(own - theirs)
     finally:
         for server in servers.values():
             server.stop()
     info = machine()
     rows, diffs = [], {}
-    for (target, client, transport), runs in p50.items():
-        base = np.array(p50[target, "Python", _base(transport)])
-        diffs[target, client, transport] = float(np.median(np.array(runs) - base))
+    for key in cmds:
+        target, client, transport = key
+        runs = p50[key]
+        diffs[key] = float(np.median(paired[key])) if key in paired else 0.0
         rows.append(f"| {target} | {client} | {transport} | {np.median(runs):.3f} | "
                     f"{max(p99[target, client, transport]):.3f} | "
                     f"{diffs[target, client, transport]:+.3f} |")
-    answers = []
+    answers, missed = [], []
     for target in targets:
         for client in ("TypeScript (Node)", "C++"):
             best = min((d, t) for (g, c, t), d in diffs.items() if (g, c) == (target, client))
@@ -190,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
                       if (g, c) == (target, client) and t != best[1]]
             answers.append(f"{client} on {target} {best[0]:+.3f} ms over {best[1]}"
                            + (f" ({', '.join(others)})" if others else ""))
+            if best[0] > TARGET_MS:
+                missed.append(f"{client} on {target}")
     section = "\n".join([
         BEGIN, "## Clients: a 1k-object frame's round trip per client", "",
         f"`python bench/clients.py --rounds {args.rounds} --frames {args.frames}` on "
@@ -197,14 +217,17 @@ def main(argv: list[str] | None = None) -> int:
         f"{N_OBJECTS} objects and {N_LIGHTS} lights, K = {K}, every light moving; a full "
         "frame over HTTP/msgpack on one kept-alive connection, timed from update_lights to "
         "the decoded frame, each client in its own process against one `lightsched serve`, "
-        f"{args.rounds} interleaved rounds of {args.frames} frames.", "",
+        f"{args.rounds} rounds of {args.frames} frames; each run sits beside a Python run on "
+        "the same target and transport, in alternating order.", "",
         "The server runs once per numba target (native; avx2 forces the AVX2 path through "
         "NUMBA_CPU_NAME / NUMBA_CPU_FEATURES), all cases interleaved in one run.", "",
         "| server target | client | transport | p50 ms | p99 ms (worst run) | "
         "p50 vs Python, same target and transport (paired) |",
         "|---|---|---|---|---|---|", *rows, "",
         "**Answer (issue 50):** p50 against the Python client's on the same transport, "
-        "each client on its best: " + "; ".join(answers) + ". The target is within 0.3 ms.",
+        "each client on its best: " + "; ".join(answers) + ". "
+        + (f"Over the {TARGET_MS} ms target: {', '.join(missed)}." if missed
+           else f"Every client is within the {TARGET_MS} ms target."),
         END, ""])
     print(section)
     if args.write:
