@@ -1,9 +1,9 @@
 /**
  * lightsched/node: a transport for Node programs. ``nodeFetch()`` sends the client's HTTP
  * calls through Node's own http module on kept-alive sockets with Nagle off, in place of
- * the global fetch (undici): a 1k-object frame's round trip is ~0.5 ms shorter
- * (bench/clients.py). Browsers keep their fetch; this entry is the only one that imports
- * Node APIs.
+ * the global fetch (undici), whose per-request cost is most of a 1k-object frame's round
+ * trip (bench/RESULTS.md, "Clients"). Browsers keep their fetch; this entry is the only one
+ * that imports Node APIs.
  *
  *   const client = new Client(url, { fetch: nodeFetch() });
  */
