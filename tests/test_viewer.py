@@ -116,6 +116,7 @@ def canvas_pixels(page: Any) -> np.ndarray:
 def stats(page: Any) -> dict[str, Any]:
     return page.evaluate("""() => { const s = window.lightsched; return {frames: s.frames,
         frameIndex: s.frameIndex, maxCount: s.maxCount, setsChanged: s.setsChanged,
+        shadowViews: s.shadowViews, shadowedSlots: s.shadowedSlots,
         programs: s.programs(), error: s.error, config: s.config, explained: s.explained}; }""")
 
 
@@ -142,6 +143,8 @@ def test_viewer_draws_the_city_and_reconfigures_without_recompiling(browser, ser
     first = stats(page)
     assert first["error"] is None and first["config"]["max_lights"] == 8
     assert first["maxCount"] > 2, "some object should hold more than two lights at K = 8"
+    # The city's shadowed lights have their maps drawn and slots that sample them.
+    assert first["shadowViews"] > 0 and first["shadowedSlots"] > 0, first
 
     # Not blank: a lit city has many colours, not a cleared buffer.
     before = canvas_pixels(page)
