@@ -23,15 +23,21 @@
  * tile per view: six for a point light (its cube faces, DESIGN's bits +x, -x, +y, -y, +z,
  * -z, each a 90 degree frustum), one for a spot light (a frustum over its cone). A tile's
  * side is the light's shadow_tier, scaled down to fit by DESIGN's own atlas rule with this
- * atlas's size (layoutShadowTiles): the lights that do not fit even at the smallest tile
- * are drawn unshadowed, then the lowest-ranked lights halve first. Each view draws only
+ * atlas's size and smallest tile (layoutShadowTiles): the lights after the longest prefix
+ * of shadow_lights that fits at the smallest tile are drawn unshadowed, then, until the
+ * rest fit, the last light above the smallest tile halves, so the scheduler's ranking
+ * decides who keeps resolution. ShadowAtlas.render, once a frame after
+ * ScheduledInstances.applyFrame, draws the maps (the frame needs shadow_lights,
+ * shadow_tier, caster_offsets, caster_ids and caster_masks). Each view draws only
  * its casters, the caster_ids of its light whose caster_masks has the view's bit, as one
  * instanced draw of the objects' geometry with instance matrices refilled per view, back
  * faces only (as three.js draws its own shadow maps: a closed box's lit side then never
  * meets its own depth), writing the distance to the light over its radius packed into
  * the texel's four bytes. RGBA8 because it is renderable on every WebGL2 device, where a
- * float colour target needs EXT_color_buffer_float; a linear distance because one number
- * then serves all six faces and its bias is the same everywhere. Every view is redrawn
+ * float colour target needs EXT_color_buffer_float; a linear distance because a point
+ * light's six faces then store one comparable quantity, as precise far from the light as
+ * near it, and the bias can be a fixed share of it (a perspective depth crowds its
+ * precision at the near plane). Every view is redrawn
  * every frame: caching views until they are dirty waits for the core's shadow_views and
  * shadow_update (DESIGN section 2).
  *
