@@ -55,8 +55,8 @@
  * their views are cascades of each camera (cascade_splits, caster bits k * C + c), and
  * one map over all of a city-wide sun's casters would give metres a texel; cascaded maps
  * are left for when the core reports shadow views. The slot_shadow attributes cost a third
- * vertex attribute per four slots, so with shadows K is at most 12 (WebGL2 guarantees 16
- * attributes), 16 without.
+ * vertex attribute per four slots, so with shadows K is at most 8, 16 without (see
+ * scheduleMaterial).
  */
 
 import {
@@ -229,7 +229,7 @@ export interface ScheduleOptions {
   maxLights: number;
   /** Directional lights applied outside the slots, at most (default 4). */
   maxDirectional?: number;
-  /** Darken slot_shadow slots by this atlas's maps (K at most 12 then). */
+  /** Darken slot_shadow slots by this atlas's maps (K at most 8 then). */
   shadows?: ShadowAtlas;
 }
 
@@ -361,10 +361,11 @@ export function scheduleMaterial<M extends MeshStandardMaterial | MeshLambertMat
   const k = options.maxLights;
   const maxDirectional = options.maxDirectional ?? 4;
   const shadows = options.shadows;
-  // WebGL2 guarantees 16 vertex attributes: position, normal, the instance matrix (4) and
-  // the residual take 7; each four slots take two (light_index, fade_weight), three with
-  // slot_shadow.
-  const most = shadows ? 12 : 16;
+  // WebGL2 guarantees 16 vertex attributes, and chromium's ANGLE links at most 15 of them
+  // (measured under SwiftShader: 16 fail with "Too many attributes"). Position, normal,
+  // the instance matrix (4) and the residual take 7; each four slots take two
+  // (light_index, fade_weight), three with slot_shadow.
+  const most = shadows ? 8 : 16;
   if (!Number.isInteger(k) || k < 1 || k > most) {
     throw new RangeError(`maxLights must be an integer in 1..${most} here${shadows ? " (with shadows)" : ""}, not ${k}`);
   }

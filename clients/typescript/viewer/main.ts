@@ -79,8 +79,8 @@ controls.enableDamping = true;
 const table = new LightTable();
 // 2048 texels: chromium's software renderer (the browser tests') redraws it every frame.
 const shadows = new ShadowAtlas({ size: 2048 });
-// lightsched/three samples shadow maps up to K = 12 (vertex attributes); above, unshadowed.
-const MAX_SHADOWED_K = 12;
+// lightsched/three samples shadow maps up to K = 8 (vertex attributes); above, unshadowed.
+const MAX_SHADOWED_K = 8;
 let city: City;
 let lightIds: Int32Array;
 let lightTypes: Uint8Array;
