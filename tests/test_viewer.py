@@ -343,7 +343,7 @@ SHADOW_CASES = """async (cases) => {
   const none = [-1, -1, -1, -1];
   const point = draw(cases.point);
   const programs = renderer.info.programs.length;
-  return {
+  const got = {
     point, programs,
     pointUnshadowed: draw(cases.point, none),
     spot: draw(cases.spot),
@@ -351,6 +351,15 @@ SHADOW_CASES = """async (cases) => {
     pointAgain: draw(cases.point),
     programsAfter: renderer.info.programs.length,
   };
+  // The widest shadowed material (K = 8) links: its vertex attributes fit.
+  const widest = L.scheduleMaterial(new L.MeshStandardMaterial(), table, { maxLights: 8, shadows: atlas });
+  const wide = new L.Scene();
+  wide.add(new L.ScheduledInstances(cases.objects, widest.material, widest.uniforms, 8).mesh);
+  renderer.render(wide, camera);
+  got.widestLinks = renderer.info.programs.length === programs + 1
+    && renderer.info.programs.every((p) => p.diagnostics === undefined || p.diagnostics.runnable)
+    && renderer.getContext().getError() === 0;
+  return got;
 }"""
 
 
@@ -427,6 +436,7 @@ def test_shadowed_slots_are_dark_behind_a_caster(browser, service):
     # The first shadowed frame compiled the lit program and the casters' depth program; new
     # slot_shadow, shadow_lights and views (six faces, then one) compiled nothing more.
     assert got["programs"] == 2 and got["programsAfter"] == 2, got
+    assert got["widestLinks"], "K = 8 with shadows did not link"
 
 
 # The page of another origin: the TypeScript client (the viewer build's lightsched.js)
