@@ -116,6 +116,7 @@ def canvas_pixels(page: Any) -> np.ndarray:
 def stats(page: Any) -> dict[str, Any]:
     return page.evaluate("""() => { const s = window.lightsched; return {frames: s.frames,
         frameIndex: s.frameIndex, maxCount: s.maxCount, setsChanged: s.setsChanged,
+        shadowViews: s.shadowViews, shadowedSlots: s.shadowedSlots,
         programs: s.programs(), error: s.error, config: s.config, explained: s.explained}; }""")
 
 
@@ -142,6 +143,8 @@ def test_viewer_draws_the_city_and_reconfigures_without_recompiling(browser, ser
     first = stats(page)
     assert first["error"] is None and first["config"]["max_lights"] == 8
     assert first["maxCount"] > 2, "some object should hold more than two lights at K = 8"
+    # The city's shadowed lights have their maps drawn and slots that sample them.
+    assert first["shadowViews"] > 0 and first["shadowedSlots"] > 0, first
 
     # Not blank: a lit city has many colours, not a cleared buffer.
     before = canvas_pixels(page)
@@ -277,6 +280,163 @@ def test_the_shader_lights_each_instance_by_its_slots(browser, service):
     for case, value in expected.items():
         assert abs(got[case] - 255 * value) <= 2, (case, got, 255 * value)
     assert got["programs"] == 1, "a new frame compiled a program"
+
+
+# A point or spot light 3 m above a floor box (top at y = 0), with a small box between
+# them: the oracle's frame for the scene (reference.schedule), drawn by lightsched/three
+# with its shadow atlas. Each draw reads two floor pixels, one under the small box (in its
+# shadow: |x|, |z| < 1 on the floor) and one outside it, and returns their values with the
+# world points their centres see, so that the unshadowed value can be computed there.
+SHADOW_CASES = """async (cases) => {
+  const L = await import("/viewer/lightsched-three.js");
+  const size = 128;
+  const canvas = document.createElement("canvas");
+  canvas.width = canvas.height = size;
+  document.body.append(canvas);
+  const renderer = new L.WebGLRenderer({ canvas, preserveDrawingBuffer: true });
+  renderer.outputColorSpace = L.LinearSRGBColorSpace;
+  const table = new L.LightTable();
+  const atlas = new L.ShadowAtlas({ size: 1024 });
+  const { material, uniforms } = L.scheduleMaterial(new L.MeshLambertMaterial({ color: 0xffffff }),
+    table, { maxLights: 2, shadows: atlas });
+  const objects = new L.ScheduledInstances(cases.objects, material, uniforms, 2);
+  const scene = new L.Scene();
+  scene.add(objects.mesh);
+  const camera = new L.PerspectiveCamera(cases.camera.fovDegrees, 1, 0.1, 100);
+  camera.position.fromArray(cases.camera.position);
+  camera.lookAt(0, 0, 0);
+  camera.updateMatrixWorld();
+  const nd = (dtype, shape, data) => new L.NdArray(dtype, shape, data);
+  const floor = new L.Plane(new L.Vector3(0, 1, 0), 0);
+  const raycaster = new L.Raycaster();
+  // The pixel whose centre sees floor point (x, 0, z), and the floor point it sees exactly.
+  const sample = ([x, z]) => {
+    const ndc = new L.Vector3(x, 0, z).project(camera);
+    const px = Math.floor((ndc.x + 1) / 2 * size);
+    const py = Math.floor((ndc.y + 1) / 2 * size);
+    raycaster.setFromCamera(new L.Vector2((px + 0.5) / size * 2 - 1, (py + 0.5) / size * 2 - 1), camera);
+    const seen = raycaster.ray.intersectPlane(floor, new L.Vector3());
+    const gl = renderer.getContext();
+    const pixel = new Uint8Array(4);
+    gl.readPixels(px, py, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
+    return { value: pixel[0], at: seen.toArray() };
+  };
+  const draw = (c, slotShadow) => {
+    const f = c.frame;
+    table.set(c.light);
+    const frame = { frame_index: 0, stats: {},
+      object_id: nd("int32", [2], Int32Array.from(f.object_id)),
+      light_index: nd("int32", [2, 2], Int32Array.from(f.light_index.flat())),
+      fade_weight: nd("float32", [2, 2], Float32Array.from(f.fade_weight.flat())),
+      slot_shadow: nd("int8", [2, 2], Int8Array.from(slotShadow ?? f.slot_shadow.flat())),
+      directional_lights: nd("int32", [0], new Int32Array(0)),
+      shadow_lights: nd("int32", [f.shadow_lights.length], Int32Array.from(f.shadow_lights)),
+      shadow_tier: nd("uint16", [f.shadow_tier.length], Uint16Array.from(f.shadow_tier)),
+      caster_offsets: nd("int64", [f.caster_offsets.length], BigInt64Array.from(f.caster_offsets, BigInt)),
+      caster_ids: nd("int32", [f.caster_ids.length], Int32Array.from(f.caster_ids)),
+      caster_masks: nd("uint32", [f.caster_masks.length], Uint32Array.from(f.caster_masks)) };
+    objects.applyFrame(frame, table);
+    atlas.render(renderer, frame, table, objects);
+    renderer.render(scene, camera);
+    return { shadow: sample(cases.inShadow), outside: sample(cases.outside) };
+  };
+  const none = [-1, -1, -1, -1];
+  const point = draw(cases.point);
+  const programs = renderer.info.programs.length;
+  const got = {
+    point, programs,
+    pointUnshadowed: draw(cases.point, none),
+    spot: draw(cases.spot),
+    spotUnshadowed: draw(cases.spot, none),
+    pointAgain: draw(cases.point),
+    programsAfter: renderer.info.programs.length,
+  };
+  // The widest shadowed material (K = 8) links: its vertex attributes fit.
+  const widest = L.scheduleMaterial(new L.MeshStandardMaterial(), table, { maxLights: 8, shadows: atlas });
+  const wide = new L.Scene();
+  wide.add(new L.ScheduledInstances(cases.objects, widest.material, widest.uniforms, 8).mesh);
+  renderer.render(wide, camera);
+  got.widestLinks = renderer.info.programs.length === programs + 1
+    && renderer.info.programs.every((p) => p.diagnostics === undefined || p.diagnostics.runnable)
+    && renderer.getContext().getError() === 0;
+  return got;
+}"""
+
+
+def _shadow_scene() -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """SHADOW_CASES's argument (the boxes, the camera, and each light with the oracle's
+    frame of the scene it lights), and the lights as the scheduler took them."""
+    import lightsched as ls
+    from lightsched import reference
+
+    objects = {"id": np.array([1, 2], np.int32),
+               "bounds_min": np.array([[-6.0, -0.2, -6.0], [-0.5, 1.0, -0.5]]),
+               "bounds_max": np.array([[6.0, 0.0, 6.0], [0.5, 1.5, 0.5]])}
+    fov = 50.0
+    eye = [0.0, 4.0, 8.0]
+    camera = ls.Camera(position=eye, forward=[-c for c in eye], up=[0, 1, 0], fov_y=np.radians(fov),
+                       aspect=1, near=0.1, far=100, height_px=128)
+    point = {"id": [5], "type": [0], "position": [[0.0, 3.0, 0.0]], "radius": [10.0],
+             "direction": [[0.0, -1.0, 0.0]], "outer_angle": [0.9], "inner_angle": [0.72],
+             "intensity": [6.0], "shadows": [True]}
+    spot = {**point, "id": [8], "type": [1]}
+    cases: dict[str, Any] = {"objects": {k: v.ravel().tolist() for k, v in objects.items()},
+                             "camera": {"fovDegrees": fov, "position": eye},
+                             "inShadow": [0.0, 0.6], "outside": [1.6, 1.6]}
+    for name, light in (("point", point), ("spot", spot)):
+        arrays = {k: np.asarray(v, np.uint8 if k == "type" else np.int32 if k == "id" else None)
+                  for k, v in light.items()}
+        f = reference.schedule(arrays, objects, [camera], ls.Config(max_lights=2))
+        assert list(f.shadow_lights) == light["id"] and f.slot_shadow[0, 0] == 0, "the floor is shadowed"
+        frame = {k: getattr(f, k).tolist() for k in (
+            "object_id", "light_index", "fade_weight", "slot_shadow", "shadow_lights", "shadow_tier",
+            "caster_offsets", "caster_ids", "caster_masks")}
+        # LightTable.set takes row-major flat arrays, as the wire's are.
+        flat = {k: np.ravel(v).tolist() for k, v in light.items() if k != "shadows"}
+        cases[name] = {"light": flat, "frame": frame}
+    return cases, {"point": point, "spot": spot}
+
+
+def _unshadowed(light: dict[str, Any], at: list[float]) -> float:
+    """DESIGN section 2's light on the floor (normal +y) at ``at``, Lambert, as 0..255."""
+    p = np.array(light["position"][0])
+    x = np.array(at)
+    to_light = p - x
+    d2 = float(to_light @ to_light)
+    w = max(0.0, 1 - (d2 / light["radius"][0] ** 2) ** 2)
+    s = 1.0
+    if light["type"][0] == 1:
+        c = float(-to_light @ np.array(light["direction"][0])) / np.sqrt(d2)
+        cos_outer, cos_inner = np.cos(light["outer_angle"][0]), np.cos(light["inner_angle"][0])
+        s = float(np.clip((c - cos_outer) / (cos_inner - cos_outer), 0, 1)) ** 2
+    cosine = max(0.0, to_light[1] / np.sqrt(d2))
+    return 255 * light["intensity"][0] * w * w / (d2 + 0.01) * s * cosine
+
+
+def test_shadowed_slots_are_dark_behind_a_caster(browser, service):
+    cases, lights = _shadow_scene()
+    page = browser.new_page()
+    page.goto(f"{service}/healthz")
+    got = page.evaluate(SHADOW_CASES, cases)
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=SCREENSHOTS / "shadow-point.png")
+    page.close()
+    for name in ("point", "spot"):
+        light = lights[name]
+        shadowed, unshadowed = got[name], got[f"{name}Unshadowed"]
+        # Under the small box only the light's slot could light the floor: nothing else does.
+        assert shadowed["shadow"]["value"] <= 2, (name, got)
+        lit = _unshadowed(light, shadowed["shadow"]["at"])
+        assert lit > 60, (name, lit)  # the same pixel, lit, is far from dark
+        for case, pixel in (("shadowed", shadowed["outside"]), ("unshadowed", unshadowed["outside"]),
+                            ("unshadowed", unshadowed["shadow"])):
+            expected = _unshadowed(light, pixel["at"])
+            assert abs(pixel["value"] - expected) <= 2, (name, case, pixel, expected)
+    assert got["pointAgain"] == got["point"]
+    # The first shadowed frame compiled the lit program and the casters' depth program; new
+    # slot_shadow, shadow_lights and views (six faces, then one) compiled nothing more.
+    assert got["programs"] == 2 and got["programsAfter"] == 2, got
+    assert got["widestLinks"], "K = 8 with shadows did not link"
 
 
 # The page of another origin: the TypeScript client (the viewer build's lightsched.js)

@@ -1,7 +1,9 @@
 /**
  * The LightSched viewer: the benchmarks' city (GET /viewer/city.msgpack) in a session of
  * its own, streamed over the WebSocket, drawn with lightsched/three, with overlays of what
- * the scheduler decided and an explain panel for a clicked object.
+ * the scheduler decided and an explain panel for a clicked object. The city's shadowed
+ * point and spot lights cast shadows: each frame's shadow_lights are drawn into a shadow
+ * atlas from their casters, and the slots slot_shadow names sample it.
  *
  * Reconfiguring (K, model, fades, hysteresis) deletes the session and makes a new one
  * with the scene set again: a session's config is fixed at creation, as a Scheduler's is.
@@ -13,7 +15,7 @@ import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
 import { Client, type Frame, type Session } from "../src/client.js";
 import { FRAME_FIELDS, type FieldName } from "../src/fields.js";
-import { LightTable, ScheduledInstances, scheduleMaterial } from "../src/three.js";
+import { LightTable, ScheduledInstances, ShadowAtlas, scheduleMaterial } from "../src/three.js";
 import { MSGPACK, NdArray, decode, vectors } from "../src/wire.js";
 
 interface City {
@@ -26,8 +28,8 @@ interface City {
 type Overlay = "lit" | "count" | "fade" | "shadows";
 
 const OUTPUTS: FieldName[] = ["object_id", "visible", "count", "candidates", "light_ids",
-  "light_index", "fade_weight", "fade_state", "directional_lights", "shadow_lights",
-  "caster_offsets", "caster_ids"];
+  "light_index", "fade_weight", "fade_state", "slot_shadow", "directional_lights", "shadow_lights",
+  "shadow_tier", "caster_offsets", "caster_ids", "caster_masks"];
 // The residual (DESIGN section 2) once the frame fields list it: the shader adds it then.
 if (FRAME_FIELDS.some((f) => (f.name as string) === "residual")) OUTPUTS.push("residual" as FieldName);
 const DIRECTIONAL = 2;
@@ -75,6 +77,10 @@ controls.maxPolarAngle = Math.PI - 0.05;
 controls.enableDamping = true;
 
 const table = new LightTable();
+// 2048 texels: chromium's software renderer (the browser tests') redraws it every frame.
+const shadows = new ShadowAtlas({ size: 2048 });
+// lightsched/three samples shadow maps up to K = 8 (vertex attributes); above, unshadowed.
+const MAX_SHADOWED_K = 8;
 let city: City;
 let lightIds: Int32Array;
 let lightTypes: Uint8Array;
@@ -101,6 +107,8 @@ scene.add(slotLines, selectionBox);
 const stats = {
   ready: false, frames: 0, frameIndex: -1, maxCount: 0, setsChanged: 0, roundTripMs: 0,
   serverMs: 0, bytesSent: 0, bytesReceived: 0, error: null as string | null,
+  // The last frame's shadow map tiles drawn and slots that sample one.
+  shadowViews: 0, shadowedSlots: 0,
   config: {} as Record<string, unknown>,
   explained: null as null | { object_id: number; light_id: number[]; reason: string[] },
   programs: () => renderer.info.programs?.length ?? 0,
@@ -166,7 +174,7 @@ function buildObjects(k: number): void {
     (m.material as THREE.Material).dispose();
   }
   const lit = scheduleMaterial(new THREE.MeshStandardMaterial({ color: 0xb8bcc4, roughness: 0.8 }), table,
-    { maxLights: k });
+    { maxLights: k, shadows: k <= MAX_SHADOWED_K ? shadows : undefined });
   instances = new ScheduledInstances(city.objects as never, lit.material, lit.uniforms, k);
   overlayMesh = new THREE.InstancedMesh(instances.mesh.geometry,
     new THREE.MeshBasicMaterial({ toneMapped: false }), instances.ids.length);
@@ -243,6 +251,13 @@ async function step(): Promise<void> {
   }
   frame = f;
   instances!.applyFrame(f, table);
+  if (instances!.maxLights <= MAX_SHADOWED_K) {
+    shadows.render(renderer, f, table, instances!);
+    stats.shadowViews = shadows.tiles.x.filter((x) => x >= 0).length;
+    stats.shadowedSlots = f.slot_shadow!.data.filter((j) => j >= 0).length;
+  } else {
+    stats.shadowViews = stats.shadowedSlots = 0;
+  }
   stats.maxCount = f.count!.data.reduce((a, b) => Math.max(a, b), 0);
   stats.frames++;
   stats.frameIndex = f.frame_index;
@@ -287,7 +302,7 @@ function updateOverlay(): void {
     const casters = frame.caster_ids!.data;
     for (let j = 0; j + 1 < offsets.length; j++) {
       for (let m = Number(offsets[j]); m < Number(offsets[j + 1]); m++) {
-        const row = instanceOf(casters[m]);
+        const row = instances!.instanceOf(casters[m]);
         if (row >= 0 && casterOf[row] < 0) casterOf[row] = j;
       }
     }
@@ -319,24 +334,13 @@ function updateOverlay(): void {
   overlayMesh.instanceColor!.needsUpdate = true;
 }
 
-function instanceOf(objectId: number): number {
-  const ids = instances!.ids;
-  let lo = 0;
-  let hi = ids.length;
-  while (lo < hi) {
-    const mid = (lo + hi) >>> 1;
-    if (ids[mid] < objectId) lo = mid + 1;
-    else hi = mid;
-  }
-  return lo < ids.length && ids[lo] === objectId ? lo : -1;
-}
-
 function showOverlay(next: Overlay): void {
   overlay = next;
   if (instances) instances.mesh.visible = overlay === "lit";
   if (overlayMesh) overlayMesh.visible = overlay !== "lit";
   const legend: Record<Overlay, string> = {
-    lit: "each box lit by its K slots (times fade_weight), the moon outside the slots",
+    lit: "each box lit by its K slots (times fade_weight), shadowed slots darkened by their light's "
+      + "shadow map, the moon outside the slots",
     count: `<span class="swatch" style="background:#1e3a8a"></span>few lights → <span class="swatch" style="background:#facc15"></span>K lights<br>`
       + `<span class="swatch" style="background:#ff1a40"></span>overflow: candidates &gt; K`,
     fade: `<span class="swatch" style="background:#1aff4d"></span>a slot fading in <span class="swatch" style="background:#ff2619"></span>fading out `
@@ -399,8 +403,17 @@ function showStats(): void {
     <tr><th>overflow (candidates &gt; K)</th><td>${overflow}</td></tr>
     <tr><th>slots fading</th><td>${fading}</td></tr>
     <tr><th>shadow lights</th><td>${f.shadow_lights!.data.length}, ${f.caster_ids!.data.length} casters</td></tr>
+    <tr><th>shadow maps</th><td>${shadowMaps(k)}</td></tr>
     <tr><th>programs</th><td>${stats.programs()}</td></tr>
   </table>`;
+}
+
+/** The atlas's tiles this frame, or why there are none. */
+function shadowMaps(k: number): string {
+  if (k > MAX_SHADOWED_K) return `off at K &gt; ${MAX_SHADOWED_K}`;
+  const sizes = [...shadows.tiles.size].filter((s) => s > 0);
+  if (sizes.length === 0) return "none";
+  return `${sizes.length} in ${shadows.size}², tiles ${Math.min(...sizes)}–${Math.max(...sizes)}`;
 }
 
 async function showExplain(instance: number): Promise<void> {
