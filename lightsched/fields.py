@@ -22,8 +22,9 @@ import numpy as np
 
 # Axis symbols of a shape, DESIGN section 3's: N objects, K slots, D directional lights,
 # V visible lights, S shadowed lights (S' in DESIGN), M casters, one row per camera, C
-# cascades.
-PER_OBJECT_SHAPES = (("N",), ("N", "K"))
+# cascades; an axis of digits is that fixed length (residual's 4 coefficients).
+# Per-object arrays are "N", "N" by "K", or "N" by a fixed length.
+PER_OBJECT_SHAPES = (("N",), ("N", "K"), ("N", "4"))
 
 
 @dataclass(frozen=True)
@@ -42,8 +43,8 @@ class FrameField:
 
     @property
     def kind(self) -> str:
-        """"N" (per object), "NK" (per object slot), or the shape's axes joined by ","
-        for a per-frame array."""
+        """"N" (per object), "NK" (per object slot), "N4" (per object, 4 values), or the
+        shape's axes joined by "," for a per-frame array."""
         return "".join(self.shape) if self.shape in PER_OBJECT_SHAPES else ",".join(self.shape)
 
     def document(self) -> dict[str, Any]:
@@ -93,6 +94,9 @@ FIELDS: tuple[FrameField, ...] = (
     _per_frame("caster_masks", np.uint32, ("M",),
                "per caster: the views it is drawn into (point: cube faces; spot: "
                "bit 0; directional: bit camera * C + cascade)"),
+    _per_object("residual", np.float32, ("N", "4"), 0.0,
+                "L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in "
+                "the slots; the shader adds max(0, a/4 + (b . n)/2)"),
 )
 
 FIELDS_BY_NAME: dict[str, FrameField] = {f.name: f for f in FIELDS}
@@ -140,6 +144,8 @@ EXPLAIN_FIELDS: tuple[ExplainField, ...] = (
 def axis_size(axis: str, n: int, k: int, cascades: int) -> int:
     """The length of an axis in a frame of ``n`` objects where nothing is lit, seen or
     shadowed (and no camera ran)."""
+    if axis.isdigit():
+        return int(axis)
     return {"N": n, "K": k, "C+1": cascades + 1, "S+1": 1}.get(axis, 0)
 
 

@@ -27,12 +27,13 @@ _WORDS = ((8, np.uint64), (4, np.uint32), (2, np.uint16))
 # The order objects.object_pass takes its output arrays in (after "visible", its input), which
 # is the scheduler's; fields.py owns the rest.
 _OBJECT_PASS_ORDER = ("visible", "light_ids", "light_index", "priority", "fade_weight",
-                      "fade_state", "count", "candidates", "slot_shadow")
+                      "fade_state", "count", "candidates", "slot_shadow", "residual")
 if sorted(_OBJECT_PASS_ORDER) != sorted(PER_OBJECT_NAMES):
     raise RuntimeError("frame._OBJECT_PASS_ORDER must name fields.py's per-object arrays")
 
-# Per-object arrays: dtype, shape ("N" or "NK") and the value of an empty slot (DESIGN
-# section 3), in the order objects.object_pass writes them.
+# Per-object arrays: dtype, shape ("N", "NK" or "N4") and the value of an empty slot
+# (DESIGN section 3), in the order objects.object_pass writes them (residual last: the
+# residual pass's, after it).
 PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
     name: (FIELDS_BY_NAME[name].dtype, FIELDS_BY_NAME[name].kind, FIELDS_BY_NAME[name].empty)
     for name in _OBJECT_PASS_ORDER}
@@ -63,6 +64,7 @@ class Frame:
     caster_offsets: np.ndarray
     caster_ids: np.ndarray
     caster_masks: np.ndarray
+    residual: np.ndarray
     stats: dict[str, Any] = field(default_factory=dict)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -77,11 +79,16 @@ def freeze(frame: Frame) -> Frame:
     return frame
 
 
+def field_shape(name: str, n: int, k: int, cascades: int = 0) -> tuple[int, ...]:
+    """The shape of array ``name`` in a frame of ``n`` objects where nothing is lit, seen
+    or shadowed (the per-object arrays' shapes in any frame of n objects)."""
+    return tuple(axis_size(axis, n, k, cascades) for axis in FIELDS_BY_NAME[name].shape)
+
+
 def _empty(name: str, n: int, k: int, cascades: int) -> np.ndarray:
     """One array of a frame where no object has a light (DESIGN section 3 empty slots)."""
     f = FIELDS_BY_NAME[name]
-    shape = tuple(axis_size(axis, n, k, cascades) for axis in f.shape)
-    return np.full(shape, f.empty if f.per_object else 0, f.dtype)
+    return np.full(field_shape(name, n, k, cascades), f.empty if f.per_object else 0, f.dtype)
 
 
 def empty_frame(ids: np.ndarray, k: int, cascades: int, **given: Any) -> Frame:

@@ -5,6 +5,7 @@ shadowed slots (shadows.pick_slot_shadows), outputs out.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -13,8 +14,9 @@ import numpy as np
 
 from .buffers import Buffers, SpareOutputs, read_only_view
 from .fade import fade_object, held_slots, steady_slots
-from .frame import PER_OBJECT, copy_rows, held_elsewhere, rows_not_in
+from .frame import PER_OBJECT, copy_rows, field_shape, held_elsewhere, rows_not_in
 from .jit import OBJECT_CHUNK, PRANGE_ONLY
+from .priority import residual_term
 from .scene import ON
 from .select import (
     CF_P,
@@ -46,17 +48,21 @@ from .simd import LANES, held_row
 if TYPE_CHECKING:
     from .pair_cache import PairCache
     from .plan import FramePlan
+    from .priority import Packed
     from .scene import Config, LightStore, ObjectStore
     from .scheduler import FrameState
     from .shadows import ShadowSet
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 
-# Per-object outputs the object pass writes ("visible" is the visibility array itself).
+# Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
-# The object pass's output arrays: WRITTEN (DESIGN section 3), each [N, K] or [N], and
-# ``fading`` bool [N], whether a slot of the object is fading in or out.
-ObjectOutputs = NamedTuple("ObjectOutputs", [(name, np.ndarray) for name in WRITTEN]
+# Those of the object pass: all but the residual, which the residual pass writes after it
+# (simd.held_row takes the object pass's outputs as they are).
+PASS_WRITTEN = tuple(name for name in WRITTEN if name != "residual")
+# The object pass's output arrays: PASS_WRITTEN (DESIGN section 3), each [N, K] or [N],
+# and ``fading`` bool [N], whether a slot of the object is fading in or out.
+ObjectOutputs = NamedTuple("ObjectOutputs", [(name, np.ndarray) for name in PASS_WRITTEN]
                            + [("fading", np.ndarray)])
 
 
@@ -247,6 +253,105 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
 
 
+class ResidualInputs(NamedTuple):
+    """What the residual pass reads (DESIGN section 2, "Residual")."""
+
+    seg: np.ndarray          # int64 [N, 2]: (start, length) of each object's pairs
+    light_row: np.ndarray    # int32 [H]: the pair heap's light rows (group.PairHeap)
+    res_id: np.ndarray       # int32 [L]: per light row its id if it counts, else -2
+    hot: np.ndarray          # float64 [L, 8]: priority.PackedLights.hot
+    lf: np.ndarray           # float64 [L, 8]: priority.PackedLights.f
+    bounds_min: np.ndarray   # float64 [N, 3]: the object store's
+    bounds_max: np.ndarray   # float64 [N, 3]
+    origin: np.ndarray       # float64 [3]: the packed rows' origin (0 in exact precision)
+    slot_ids: np.ndarray     # int32 [N, K]: this frame's light_ids (the object pass's)
+    slot_weight: np.ndarray  # float64 [N, K]: this frame's slot weights, by slot
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def residual_pass(run, visible, inputs, residual):
+    """residual[o] for the object rows ``run`` (ascending, parallel in chunks) once the
+    object pass has written their slots: over o's cached pairs whose light counts
+    (res_id >= 0: live, and with unshadowed = "skip" not a light with shadows), in
+    ascending light row (= ascending id), t = (1 - w_l) * E_l with w_l the float64 weight
+    of l's slot (0 without one) and (E_l, u_l) priority.residual_term's; a += t, b += t u;
+    stored float32. Invisible objects get 0. run: int64 object rows; visible: bool [N];
+    inputs: ResidualInputs; residual: float32 [N, 4], written at ``run``. DESIGN section
+    2, "Residual"; section 3 (residual [N, 4]); section 6 (only ``run``).
+
+    A pass of its own after the object pass rather than inside it: the object pass's
+    common rows go through simd.held_row, whose outputs are fixed vector stores, and the
+    residual reads the slots' final weights, which that pass writes last."""
+    seg, heap_j, res_id = inputs.seg, inputs.light_row, inputs.res_id
+    hot, lf, lo, hi, origin = inputs.hot, inputs.lf, inputs.bounds_min, inputs.bounds_max, \
+        inputs.origin
+    slot_ids, slot_w = inputs.slot_ids, inputs.slot_weight
+    k = slot_ids.shape[1]
+    n_run = run.shape[0]
+    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    for ch in nb.prange(n_chunks):
+        first, end = ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)
+        size = 1
+        for r in range(first, end):
+            size = max(size, seg[run[r], 1])
+        rows = np.empty(size, np.int32)
+        for r in range(first, end):
+            o = run[r]
+            a = 0.0
+            b0 = 0.0
+            b1 = 0.0
+            b2 = 0.0
+            if visible[o]:
+                m = 0
+                for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
+                    j = heap_j[t]
+                    if res_id[j] >= 0:
+                        rows[m] = j
+                        m += 1
+                if m > 1:
+                    rows[:m].sort()
+                if m:
+                    ex = hi[o, 0] - lo[o, 0]
+                    ey = hi[o, 1] - lo[o, 1]
+                    ez = hi[o, 2] - lo[o, 2]
+                    e2 = ex * ex + ey * ey + ez * ez
+                    geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
+                           (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
+                           (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
+                for i in range(m):
+                    j = rows[i]
+                    lid = res_id[j]
+                    w = 0.0
+                    for s in range(k):
+                        w = slot_w[o, s] if slot_ids[o, s] == lid else w
+                    rho = 1.0 - w
+                    if rho == 0.0:
+                        continue  # wholly in its slot: t = 0 adds nothing
+                    e, u0, u1, u2 = residual_term(hot, lf, j, geo)
+                    t = rho * e
+                    a += t
+                    b0 += t * u0
+                    b1 += t * u1
+                    b2 += t * u2
+            residual[o, 0] = np.float32(a)
+            residual[o, 1] = np.float32(b0)
+            residual[o, 2] = np.float32(b1)
+            residual[o, 3] = np.float32(b2)
+
+
+def residual_ids(live_id: np.ndarray, shadows: np.ndarray, skip: bool,
+                 out: np.ndarray | None = None) -> np.ndarray:
+    """residual_pass's res_id: live_id, with the lights that have shadows at -2 too under
+    unshadowed = "skip" (the residual has no shadow to keep them out of a wall's lee)."""
+    if not skip:
+        return live_id
+    if out is None or out.shape != live_id.shape:
+        out = np.empty(live_id.shape, np.int32)
+    np.copyto(out, live_id)
+    out[shadows] = -2
+    return out
+
+
 # --------------------------------------------------------------------------- the objects stage
 # Per-object state kept in the object store: the float64 slot weights and last frame's
 # selection (the slot ids and states are the last frame's light_ids and fade_state).
@@ -268,9 +373,9 @@ class Outputs:
 
 
 def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
-                    shadows: ShadowSet, visible: np.ndarray, lights: LightStore,
-                    objects: ObjectStore, renumbered: bool, config: Config, dt: float,
-                    buffers: Buffers) -> Outputs:
+                    packed: Packed, shadows: ShadowSet, visible: np.ndarray,
+                    lights: LightStore, objects: ObjectStore, renumbered: bool, config: Config,
+                    dt: float, buffers: Buffers) -> Outputs:
     """The objects stage: top-K with hysteresis, fade and slot_shadow (object_pass) on the
     rows the pair cache stage gives (every row in a full frame); the other rows are last
     frame's. A full frame leaves out the objects out of view in it and the two frames
@@ -311,9 +416,18 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
         n_l = len(lights)
         live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
         object_pass(run, (read_only_view(visible), reset), cache.seg, cache.heap, live_id,
-                    state, ObjectOutputs(*(out[name] for name in WRITTEN), fading), params,
+                    state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     (0,) * k if k in STATIC_K else ())
+        if config.residual:
+            res_id = residual_ids(live_id, lights.shadows, config.unshadowed == "skip",
+                                  buffers.scratch("res_id", n_l, np.int32)[:n_l])
+            residual_pass(run, read_only_view(visible), ResidualInputs(
+                cache.seg, cache.heap.light_row, res_id, packed.rows.hot, packed.rows.f,
+                objects.bounds_min, objects.bounds_max, packed.origin, out["light_ids"],
+                objects.get("slot_weight")), out["residual"])
+        else:
+            out["residual"][run] = 0.0
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])
     objects.put("was_visible", visible)
@@ -350,8 +464,8 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
             return spare.arrays, None
         return spare.arrays, spare.visible if spare.visible.shape == (n,) else None
     if written is None:
-        return {name: np.empty((n, k) if PER_OBJECT[name][1] == "NK" else n,
-                               PER_OBJECT[name][0]) for name in WRITTEN}, None
+        return {name: np.empty(field_shape(name, n, k), PER_OBJECT[name][0])
+                for name in WRITTEN}, None
     return {name: getattr(last.frame, name).copy() for name in WRITTEN}, None
 
 

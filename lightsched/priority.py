@@ -353,8 +353,38 @@ def thesis(hot, lf, j, geo, w_obj, w_int):
     return lf[j, 7] + w_obj * d_object + w_int * hot[j, 6] + hot[j, 7]
 
 
-__all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "box_d2", "falloff", "pack_lights", "spot_cone",
-           "thesis"]
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def residual_term(hot, lf, j, geo):
+    """(E_l, u_x, u_y, u_z) of light row j over the object geo = (c0, c1, c2, R, e2) for
+    the residual: the light over the whole object, so from the box centre c, not the
+    nearest point. Point and spot: v = p - c, dc2 = max(v . v, R*R), q = dc2/(r*r),
+    w = max(0, 1 - q*q), E = i*w*w/(dc2 + r0*r0) * s (s: spot_cone's spot factor, 0 off
+    the cone), u = v/|v| ((0, 0, 0) when v . v is 0); directional: E = i, u = -direction.
+    hot, lf: PackedLights' rows; j: the light's row; geo as record_geometry gives it, in
+    the packed rows' frame. DESIGN section 2, "Residual" (its per-light term; the
+    residual pass of objects.py sums them)."""
+    if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
+        return hot[j, 6], -lf[j, 0], -lf[j, 1], -lf[j, 2]
+    v0 = hot[j, 0] - geo[0]
+    v1 = hot[j, 1] - geo[1]
+    v2 = hot[j, 2] - geo[2]
+    vv = v0 * v0 + v1 * v1 + v2 * v2
+    dc2 = max(vv, geo[3] * geo[3])
+    r = hot[j, 3]
+    q = dc2 / (r * r)
+    w = max(0.0, 1.0 - q * q)
+    e = hot[j, 6] * w * w / (dc2 + R0 * R0)
+    if (np.int64(hot[j, 5]) >> 3) & 3 == SPOT:
+        e = e * spot_cone(hot, lf, j, geo, True)[1]
+    if vv == 0.0:
+        # (Also when v is so short that its square underflows: no direction either.)
+        return e, 0.0, 0.0, 0.0
+    n = math.sqrt(vv)
+    return e, v0 / n, v1 / n, v2 / n
+
+
+__all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "box_d2", "falloff", "pack_lights",
+           "residual_term", "spot_cone", "thesis"]
 
 
 # ------------------------------------------------------------- a light and an object record

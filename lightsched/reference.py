@@ -29,6 +29,11 @@ Decisions taken where DESIGN is silent (the fast path makes the same ones):
   without a slot; that set is empty for a new object or one invisible last frame.
 - An object that is new, was invisible last frame, on the first frame, or in a cut frame
   gets exactly its selected lights, on at weight 1.
+- Residual: the lights competing for o's slots are those with a P for o (``_priorities``:
+  visible, masks, Affects, not removed by "skip"); with "skip" those with shadows = true are
+  then left out too, shadow lights included. u = (0, 0, 0) when v . v == 0 (which also
+  covers a v so short that its square underflows). The residual is computed for both
+  models: E does not depend on P.
 - Thesis eccentricity uses the focal ray g = f + (focus_x t_x) r + (focus_y t_y) u and
   theta = atan2(|g x v|, g . v); P is the max over all cameras.
 """
@@ -525,6 +530,7 @@ class Scheduler(SceneAPI):
 
         frame = empty_frame(self.objects.id, cfg.max_lights, cfg.cascades)
         row_of = {lt.id: lt.row for lt in lights}
+        by_id = {lt.id: lt for lt in lights}
         pairs = 0
         explained: dict[int, Any] = {}  # object id -> (last selection, slots, selection)
         for ob in objects:
@@ -548,6 +554,8 @@ class Scheduler(SceneAPI):
             st.selected = set(selected)
             st.visible = True
             _write_object(frame, ob.row, st.slots, prio, row_of, shadow_index, cfg)
+            if cfg.residual:
+                frame.residual[ob.row] = _residual(ob, st.slots, prio, by_id, cfg)
             explained[ob.id] = (prev_selected, copy.deepcopy(st.slots), set(selected))
 
         directional = {lt.id: lt.intensity + lt.p_user for lt in lights
@@ -775,6 +783,50 @@ def _write_object(frame: Any, row: int, slots: list[list[Any]], prio: dict[int, 
         frame.priority[row, j] = np.float32(prio[lid])
         frame.fade_weight[row, j] = np.float32(weight)
         frame.fade_state[row, j] = state
+
+
+def residual_term(lt: _Light, ob: _Object) -> tuple[float, Vec]:
+    """(E_l, u_l) of DESIGN section 2, "Residual": the light over the whole object, from
+    the box centre, without g or p_user."""
+    if lt.type == DIRECTIONAL:
+        d = lt.direction
+        return lt.intensity, (-d[0], -d[1], -d[2])
+    p, c = lt.position, ob.centre
+    v = (p[0] - c[0], p[1] - c[1], p[2] - c[2])
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    dc2 = max(vv, ob.R * ob.R)
+    r = lt.radius
+    q = dc2 / (r * r)
+    w = max(0.0, 1 - q * q)
+    s = spot_factor(lt, ob) if lt.type == SPOT else 1.0
+    e = lt.intensity * w * w / (dc2 + R0 * R0) * s
+    # v . v == 0 also when v is so short that its square underflows: no direction then
+    # either, and no division by zero.
+    if vv == 0.0:
+        return e, (0.0, 0.0, 0.0)
+    n = math.sqrt(vv)
+    return e, (v[0] / n, v[1] / n, v[2] / n)
+
+
+def _residual(ob: _Object, slots: list[list[Any]], prio: dict[int, float],
+              by_id: dict[int, _Light], cfg: Config) -> tuple[float, float, float, float]:
+    """residual[o] (DESIGN section 2, "Residual"): every light competing for o's slots
+    (``prio``'s), weighted by 1 minus its slot's weight, in ascending light id; with
+    unshadowed = "skip" the lights with shadows = true are left out."""
+    weight = {lid: w for lid, w, _ in slots}
+    a = bx = by = bz = 0.0
+    for lid in sorted(prio):
+        lt = by_id[lid]
+        if cfg.unshadowed == "skip" and lt.shadows:
+            continue
+        rho = 1 - weight.get(lid, 0.0)
+        e, u = residual_term(lt, ob)
+        t = rho * e
+        a += t
+        bx += t * u[0]
+        by += t * u[1]
+        bz += t * u[2]
+    return a, bx, by, bz
 
 
 def _write_casters(frame: Any, lights: list[_Light], objects: list[_Object],

@@ -71,6 +71,14 @@ def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
     return int(value)
 
 
+def _check_bool(config: Any, name: str) -> None:
+    """A boolean field of a frozen Config, numpy's bool taken as Python's."""
+    value = getattr(config, name)
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValidationError(name, None, "must be a boolean")
+    object.__setattr__(config, name, bool(value))
+
+
 @dataclass(frozen=True)
 class Config:
     """Per-scheduler settings; names and defaults are DESIGN section 1's."""
@@ -94,6 +102,7 @@ class Config:
     max_shadowed_per_object: int | None = None  # None means min(2, max_lights)
     unshadowed: str = "light"
     precision: str = "exact"
+    residual: bool = True
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -106,9 +115,7 @@ class Config:
         set_(self, "c1", _check_real("c1", self.c1, 0.0, lo_open=True))
         for name in ("hysteresis", "hysteresis_abs", "fade_in", "fade_out"):
             set_(self, name, _check_real(name, getattr(self, name), 0.0))
-        if not isinstance(self.directional_in_slots, (bool, np.bool_)):
-            raise ValidationError("directional_in_slots", None, "must be a boolean")
-        set_(self, "directional_in_slots", bool(self.directional_in_slots))
+        _check_bool(self, "directional_in_slots")
         set_(self, "shadow_budget", _check_int("shadow_budget", self.shadow_budget, 0, 127))
         set_(self, "cascades", _check_int("cascades", self.cascades, 1, 4))
         set_(self, "shadow_distance",
@@ -120,6 +127,7 @@ class Config:
             raise ValidationError("unshadowed", None, f"must be 'light' or 'skip', got {self.unshadowed!r}")
         if self.precision not in ("exact", "fast"):
             raise ValidationError("precision", None, f"must be 'exact' or 'fast', got {self.precision!r}")
+        _check_bool(self, "residual")
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -136,7 +136,7 @@ class Scheduler(SceneAPI):
         cache = clock.lap("lists", update_pair_cache(plan, last, pairs, shadows, vis, packed,
                                                      grid, changes.light_rows, tuning, buffers))
         outputs = clock.lap("objects", select_and_fade(
-            plan, last, cache, shadows, vis.objects, lights, objects,
+            plan, last, cache, packed, shadows, vis.objects, lights, objects,
             changes.object_rows is None, cfg, dt, buffers))
         frame = self._output(last, cams, vis, shadows, casters, outputs)
         self._shadows = shadows

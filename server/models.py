@@ -63,6 +63,7 @@ class ConfigModel(BaseModel):
     max_shadowed_per_object: int | None = None
     unshadowed: Literal["light", "skip"] | None = None
     precision: Literal["exact", "fast"] | None = None
+    residual: bool | None = None
 
 
 class CameraModel(BaseModel):

@@ -2,7 +2,8 @@
 runner that drives both schedulers through the same calls, and small scene builders.
 
 ``assert_frames_match`` is strict everywhere except where DESIGN section 4 allows slack:
-priorities 1e-6 relative, fade weights 1e-6 absolute, cascade splits 1e-12 relative, and
+priorities 1e-6 relative, fade weights 1e-6 absolute, cascade splits 1e-12 relative, the
+residual 1e-5 relative to its a (rows whose slots hold the same lights), and
 the order (and the K cut) of two lights of one object whose oracle P differ by less than
 ``tie_rel`` relative. ``tie_rel=0`` is the exact mode of the 2^-16 m grid: identical ids,
 order and states, and (``bitwise``, implied by tie_rel=0) bit-identical floats.
@@ -134,6 +135,7 @@ def assert_frames_match(fast: ls.Frame, oracle: ls.Frame, rel: float = 1e-6,
     same_ids = np.all(fast.light_ids == oracle.light_ids, axis=1)
     rows = np.flatnonzero(same_ids)
     _compare_same_rows(fast, oracle, rows, rel, p_atol, w_atol, bitwise, tag)
+    assert_residual_close(fast, oracle, rows, tag)
     tied = 0
     for o in np.flatnonzero(~same_ids):
         msg = (f"{tag}object id {int(fast.object_id[o])} (row {o}) differs:\n"
@@ -143,6 +145,27 @@ def assert_frames_match(fast: ls.Frame, oracle: ls.Frame, rel: float = 1e-6,
         _check_tie_row(fast, oracle, int(o), rel, tie_rel, p_atol, w_atol, oracle_p, msg)
         tied += 1
     return tied
+
+
+RESIDUAL_REL = 1e-5  # DESIGN section 4: residual within 1e-5 relative to max(|a|, 1e-30)
+
+
+def assert_residual_close(fast: ls.Frame, oracle: ls.Frame, rows: np.ndarray | None = None,
+                          tag: str = "") -> None:
+    """residual of the ``rows`` (every row when None) within DESIGN section 4's tolerance:
+    each component within 1e-5 of max(|a|, 1e-30), a the oracle's. Rows whose slots differ
+    by a near-tie are left out by the caller: their residuals hold different lights."""
+    a = fast.residual if rows is None else fast.residual[rows]
+    b = oracle.residual if rows is None else oracle.residual[rows]
+    a, b = a.astype(np.float64), b.astype(np.float64)
+    scale = np.maximum(np.abs(b[:, :1]), 1e-30)
+    bad = ~(np.abs(a - b) <= RESIDUAL_REL * scale)
+    if bad.any():
+        i = int(np.flatnonzero(bad.any(axis=1))[0])
+        o = i if rows is None else int(rows[i])
+        raise AssertionError(f"{tag}residual differs at object id {fast.object_id[o]}:\n"
+                             f"  fast   {fast.residual[o]!r}\n  oracle {oracle.residual[o]!r}\n"
+                             f"  fast   {_row_text(fast, o)}\n  oracle {_row_text(oracle, o)}")
 
 
 def _compare_same_rows(fast, oracle, rows, rel, p_atol, w_atol, bitwise, tag):
@@ -239,6 +262,10 @@ def assert_frame_sane(f: ls.Frame, k: int, what: str = "") -> None:
     assert np.all((cnt >= 0) & (cnt <= k)), tag + "count out of range"
     assert np.all(cnt <= f.candidates), tag + "count > candidates"
     assert np.all(cnt[~f.visible] == 0) and np.all(f.candidates[~f.visible] == 0), tag + "invisible lit"
+    assert f.residual.shape == (n, 4), tag + "residual shape"
+    assert np.all(np.isfinite(f.residual)), tag + "non-finite residual"
+    assert np.all(f.residual[~f.visible] == 0), tag + "invisible residual"
+    assert np.all(f.residual[:, 0] >= 0), tag + "negative residual a"
     slot = np.arange(k)[None, :]
     empty = slot >= cnt[:, None]
     assert np.all(f.light_ids[empty] == -1) and np.all(f.light_index[empty] == -1), tag + "empty ids"

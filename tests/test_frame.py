@@ -43,14 +43,15 @@ def test_frame_fields_are_the_one_field_list():
     assert FRAME_ARRAYS == {f.name: f.dtype for f in FIELDS}
     assert list(PER_OBJECT) == ["visible", "light_ids", "light_index", "priority",
                                 "fade_weight", "fade_state", "count", "candidates",
-                                "slot_shadow"]
+                                "slot_shadow", "residual"]
     assert sorted(PER_OBJECT) == sorted(PER_OBJECT_NAMES)
     assert PER_OBJECT["light_ids"] == (np.int32, "NK", -1)
     assert PER_OBJECT["visible"] == (np.bool_, "N", False)
     assert PER_OBJECT["slot_shadow"] == (np.int8, "NK", -1)
+    assert PER_OBJECT["residual"] == (np.float32, "N4", 0.0)
     f = empty_frame(np.array([4, 9, 12], np.int32), k=3, cascades=2)
     shapes = {"object_id": (3,), "visible": (3,), "count": (3,), "candidates": (3,),
-              "cascade_splits": (0, 3), "caster_offsets": (1,)}
+              "cascade_splits": (0, 3), "caster_offsets": (1,), "residual": (3, 4)}
     for field in FIELDS:
         a = getattr(f, field.name)
         assert a.dtype == np.dtype(field.dtype), field.name

@@ -844,6 +844,8 @@ def test_update_that_makes_a_row_invalid(s):
     ({"w_obj": "x"}, "w_obj"),
     ({"w_int": -INF}, "w_int"),
     ({"directional_in_slots": "yes"}, "directional_in_slots"),
+    ({"residual": 1}, "residual"),
+    ({"residual": "true"}, "residual"),
 ])
 def test_config_ranges(kwargs, field):
     with pytest.raises(ValidationError) as info:
@@ -858,7 +860,8 @@ def test_config_defaults_and_edges():
         "w_obj": -0.1, "w_int": 0.1, "c1": 0.25, "hysteresis": 0.1, "hysteresis_abs": 0.0,
         "fade_in": 0.25, "fade_out": 0.25, "directional_in_slots": False, "shadow_budget": 4,
         "cascades": 4, "shadow_distance": 150.0, "cascade_overlap": 0.1,
-        "max_shadowed_per_object": 2, "unshadowed": "light", "precision": "exact"}
+        "max_shadowed_per_object": 2, "unshadowed": "light", "precision": "exact",
+        "residual": True}
     assert Config(max_lights=1).max_shadowed_per_object == 1
     for k in (1, 32):
         Config(max_lights=k, max_shadowed_per_object=k)
@@ -870,7 +873,7 @@ def test_config_defaults_and_edges():
     Config(hysteresis=0.0, hysteresis_abs=0.0, fade_in=0.0, fade_out=0.0,
            cascade_overlap=0.0, c1=1e-300, shadow_distance=1e-300, model="thesis",
            unshadowed="skip", precision="fast", directional_in_slots=True,
-           max_lights=np.int64(3))
+           max_lights=np.int64(3), residual=np.False_)
 
 
 def test_scheduler_rejects_non_config(sched_cls):

@@ -31,6 +31,7 @@ export const FRAME_FIELDS: readonly FrameField[] = [
   {"name": "caster_offsets", "dtype": "int64", "shape": ["S+1"], "per_object": false, "empty": null, "description": "caster_ids[caster_offsets[s]:caster_offsets[s + 1]] are shadow light s's"},
   {"name": "caster_ids", "dtype": "int32", "shape": ["M"], "per_object": false, "empty": null, "description": "shadow caster object ids, ascending per light"},
   {"name": "caster_masks", "dtype": "uint32", "shape": ["M"], "per_object": false, "empty": null, "description": "per caster: the views it is drawn into (point: cube faces; spot: bit 0; directional: bit camera * C + cascade)"},
+  {"name": "residual", "dtype": "float32", "shape": ["N", "4"], "per_object": true, "empty": 0.0, "description": "L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in the slots; the shader adds max(0, a/4 + (b . n)/2)"},
 ];
 
 export type FieldName =
@@ -51,7 +52,8 @@ export type FieldName =
   | "cascade_splits"
   | "caster_offsets"
   | "caster_ids"
-  | "caster_masks";
+  | "caster_masks"
+  | "residual";
 
 /** The arrays of a frame; those not asked for (outputs) are absent. */
 export interface FrameArrays {
@@ -91,6 +93,8 @@ export interface FrameArrays {
   caster_ids?: NdArray<Int32Array>;
   /** per caster: the views it is drawn into (point: cube faces; spot: bit 0; directional: bit camera * C + cascade) (uint32 [M]) */
   caster_masks?: NdArray<Uint32Array>;
+  /** L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in the slots; the shader adds max(0, a/4 + (b . n)/2) (float32 [N, 4]) */
+  residual?: NdArray<Float32Array>;
 }
 
 // Scheduler.explain (DESIGN section 7): its reasons, in their order, and its columns.
