@@ -39,8 +39,9 @@ from .settings import Settings
 PER_OBJECT = frozenset(PER_OBJECT_NAMES)
 log = logging.getLogger(__name__)
 SWEEP = 1.0  # seconds between sweeps for idle sessions on lookups
-# What "changed" means for changed_only: the set, its order, weights and states (DESIGN's
-# per-object outputs except priority, which moves whenever a light does).
+# What "changed" means for changed_only: the set, its order, weights, states and the
+# residual (DESIGN's per-object outputs except priority, which moves whenever a light does
+# and only orders the slots; the residual moves as often but is lighting the shader adds).
 CHANGE_KEYS = tuple(name for name in PER_OBJECT_NAMES if name != "priority")
 
 

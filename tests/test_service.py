@@ -141,6 +141,9 @@ def test_changed_only_rebuilds_the_frame_and_sends_less(server):
                 continue  # priority is not part of "changed"; unchanged rows keep the last sent
             assert np.array_equal(getattr(a, name), getattr(b, name)), (k, name)
     assert raw["rows"].size == 0 and raw["light_ids"].shape == (0, 4)
+    # The residual's rows (a trailing axis of 4) are merged too, and are not all zero here.
+    assert raw["residual"].shape == (0, 4) and raw["residual"].dtype == np.float32
+    assert all(f.residual[:, 0].any() for f in full_frames)
     assert "object_id" not in raw  # the object set did not change
 
 
