@@ -54,6 +54,7 @@ if TYPE_CHECKING:
     from .shadows import ShadowSet
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
+SORT_FEW = 16                # the residual pass sorts more lights than this with numpy's sort
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
@@ -266,6 +267,9 @@ class ResidualInputs(NamedTuple):
     origin: np.ndarray       # float64 [3]: the packed rows' origin (0 in exact precision)
     slot_ids: np.ndarray     # int32 [N, K]: this frame's light_ids (the object pass's)
     slot_weight: np.ndarray  # float64 [N, K]: this frame's slot weights, by slot
+    count: np.ndarray        # int32 [N]: this frame's count (the object pass's) ...
+    candidates: np.ndarray   # int32 [N]: ... candidates ...
+    fading: np.ndarray       # bool [N]: ... and whether a slot is fading
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
@@ -286,6 +290,7 @@ def residual_pass(run, visible, inputs, residual):
     hot, lf, lo, hi, origin = inputs.hot, inputs.lf, inputs.bounds_min, inputs.bounds_max, \
         inputs.origin
     slot_ids, slot_w = inputs.slot_ids, inputs.slot_weight
+    count, candidates, fading = inputs.count, inputs.candidates, inputs.fading
     k = slot_ids.shape[1]
     n_run = run.shape[0]
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
@@ -301,34 +306,39 @@ def residual_pass(run, visible, inputs, residual):
             b0 = 0.0
             b1 = 0.0
             b2 = 0.0
-            if visible[o]:
-                m = 0
+            m = 0
+            # Every competing light in a slot, none fading: all at weight 1, nothing to
+            # add (half the objects of a city at K = 4).
+            if visible[o] and (count[o] < candidates[o] or fading[o]):
+                # Only the lights not wholly in a slot: t = 0 would add nothing.
                 for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
                     j = heap_j[t]
-                    if res_id[j] >= 0:
+                    lid = res_id[j]
+                    if lid >= 0 and _slot_weight(slot_ids, slot_w, o, k, lid) != 1.0:
                         rows[m] = j
                         m += 1
-                if m > 1:
-                    rows[:m].sort()
-                if m:
-                    ex = hi[o, 0] - lo[o, 0]
-                    ey = hi[o, 1] - lo[o, 1]
-                    ez = hi[o, 2] - lo[o, 2]
-                    e2 = ex * ex + ey * ey + ez * ez
-                    geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
-                           (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
-                           (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
+            if m > SORT_FEW:
+                rows[:m].sort()
+            elif m > 1:
+                for i in range(1, m):
+                    j = rows[i]
+                    at = i
+                    while at > 0 and rows[at - 1] > j:
+                        rows[at] = rows[at - 1]
+                        at -= 1
+                    rows[at] = j
+            if m:
+                ex = hi[o, 0] - lo[o, 0]
+                ey = hi[o, 1] - lo[o, 1]
+                ez = hi[o, 2] - lo[o, 2]
+                e2 = ex * ex + ey * ey + ez * ez
+                geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
+                       (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
+                       (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
                 for i in range(m):
                     j = rows[i]
-                    lid = res_id[j]
-                    w = 0.0
-                    for s in range(k):
-                        w = slot_w[o, s] if slot_ids[o, s] == lid else w
-                    rho = 1.0 - w
-                    if rho == 0.0:
-                        continue  # wholly in its slot: t = 0 adds nothing
                     e, u0, u1, u2 = residual_term(hot, lf, j, geo)
-                    t = rho * e
+                    t = (1.0 - _slot_weight(slot_ids, slot_w, o, k, res_id[j])) * e
                     a += t
                     b0 += t * u0
                     b1 += t * u1
@@ -337,6 +347,15 @@ def residual_pass(run, visible, inputs, residual):
             residual[o, 1] = np.float32(b0)
             residual[o, 2] = np.float32(b1)
             residual[o, 3] = np.float32(b2)
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _slot_weight(slot_ids, slot_w, o, k, lid):
+    """The weight of light ``lid``'s slot in object o, 0 without one (compares only)."""
+    w = 0.0
+    for s in range(k):
+        w = slot_w[o, s] if slot_ids[o, s] == lid else w
+    return w
 
 
 def residual_ids(live_id: np.ndarray, shadows: np.ndarray, skip: bool,
@@ -425,7 +444,8 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
             residual_pass(run, read_only_view(visible), ResidualInputs(
                 cache.seg, cache.heap.light_row, res_id, packed.rows.hot, packed.rows.f,
                 objects.bounds_min, objects.bounds_max, packed.origin, out["light_ids"],
-                objects.get("slot_weight")), out["residual"])
+                objects.get("slot_weight"), out["count"], out["candidates"], fading),
+                out["residual"])
         else:
             out["residual"][run] = 0.0
     objects.put("slot_light", out["light_ids"])

@@ -373,6 +373,9 @@ def residual_term(hot, lf, j, geo):
     r = hot[j, 3]
     q = dc2 / (r * r)
     w = max(0.0, 1.0 - q * q)
+    if w == 0.0:
+        # The centre out of range: E = 0, and t = 0 adds nothing whatever u is.
+        return 0.0, 0.0, 0.0, 0.0
     e = hot[j, 6] * w * w / (dc2 + R0 * R0)
     if (np.int64(hot[j, 5]) >> 3) & 3 == SPOT:
         e = e * spot_cone(hot, lf, j, geo, True)[1]
