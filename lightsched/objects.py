@@ -55,6 +55,7 @@ if TYPE_CHECKING:
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 SORT_FEW = 16                # the residual pass sorts more lights than this with numpy's sort
+RESIDUAL_BLOCKS = 16         # the residual pass's work items at most (each has an [L] table)
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
@@ -265,7 +266,7 @@ class ResidualInputs(NamedTuple):
     bounds_min: np.ndarray   # float64 [N, 3]: the object store's
     bounds_max: np.ndarray   # float64 [N, 3]
     origin: np.ndarray       # float64 [3]: the packed rows' origin (0 in exact precision)
-    slot_ids: np.ndarray     # int32 [N, K]: this frame's light_ids (the object pass's)
+    slot_rows: np.ndarray    # int32 [N, K]: this frame's light_index (the object pass's)
     slot_weight: np.ndarray  # float64 [N, K]: this frame's slot weights, by slot
     count: np.ndarray        # int32 [N]: this frame's count (the object pass's) ...
     candidates: np.ndarray   # int32 [N]: ... candidates ...
@@ -286,76 +287,93 @@ def residual_pass(run, visible, inputs, residual):
     A pass of its own after the object pass rather than inside it: the object pass's
     common rows go through simd.held_row, whose outputs are fixed vector stores, and the
     residual reads the slots' final weights, which that pass writes last."""
+    res_id = inputs.res_id
+    n_run = run.shape[0]
+    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    n_l = res_id.shape[0]
+    # Work in blocks of chunks, each with its own table by light row of the weight that
+    # keeps a light out of the sum: 1 for lights that do not count, and while an object
+    # is summed, its slots' weights. One load a pair, where matching each pair's id
+    # against the K slots took most of the pass.
+    n_blocks = min(n_chunks, RESIDUAL_BLOCKS)
+    for blk in nb.prange(n_blocks):
+        held = np.empty(n_l)
+        for j in range(n_l):
+            held[j] = 1.0 if res_id[j] < 0 else 0.0
+        for ch in range(blk, n_chunks, n_blocks):
+            _residual_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK),
+                            visible, inputs, held, residual)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _residual_chunk(run, first, end, visible, inputs, held, residual):
+    """residual_pass on run[first:end]; held: the block's table (float64 [L]), as it
+    left it. DESIGN section 2, "Residual"."""
     seg, heap_j, res_id = inputs.seg, inputs.light_row, inputs.res_id
     hot, lf, lo, hi, origin = inputs.hot, inputs.lf, inputs.bounds_min, inputs.bounds_max, \
         inputs.origin
-    slot_ids, slot_w = inputs.slot_ids, inputs.slot_weight
+    slot_rows, slot_w = inputs.slot_rows, inputs.slot_weight
     count, candidates, fading = inputs.count, inputs.candidates, inputs.fading
-    k = slot_ids.shape[1]
-    n_run = run.shape[0]
-    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
-    for ch in nb.prange(n_chunks):
-        first, end = ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)
-        size = 1
-        for r in range(first, end):
-            size = max(size, seg[run[r], 1])
-        rows = np.empty(size, np.int32)
-        for r in range(first, end):
-            o = run[r]
-            a = 0.0
-            b0 = 0.0
-            b1 = 0.0
-            b2 = 0.0
-            m = 0
-            # Every competing light in a slot, none fading: all at weight 1, nothing to
-            # add (half the objects of a city at K = 4).
-            if visible[o] and (count[o] < candidates[o] or fading[o]):
-                # Only the lights not wholly in a slot: t = 0 would add nothing.
-                for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                    j = heap_j[t]
-                    lid = res_id[j]
-                    if lid >= 0 and _slot_weight(slot_ids, slot_w, o, k, lid) != 1.0:
-                        rows[m] = j
-                        m += 1
-            if m > SORT_FEW:
-                rows[:m].sort()
-            elif m > 1:
-                for i in range(1, m):
-                    j = rows[i]
-                    at = i
-                    while at > 0 and rows[at - 1] > j:
-                        rows[at] = rows[at - 1]
-                        at -= 1
-                    rows[at] = j
-            if m:
-                ex = hi[o, 0] - lo[o, 0]
-                ey = hi[o, 1] - lo[o, 1]
-                ez = hi[o, 2] - lo[o, 2]
-                e2 = ex * ex + ey * ey + ez * ez
-                geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
-                       (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
-                       (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
-                for i in range(m):
-                    j = rows[i]
-                    e, u0, u1, u2 = residual_term(hot, lf, j, geo)
-                    t = (1.0 - _slot_weight(slot_ids, slot_w, o, k, res_id[j])) * e
-                    a += t
-                    b0 += t * u0
-                    b1 += t * u1
-                    b2 += t * u2
-            residual[o, 0] = np.float32(a)
-            residual[o, 1] = np.float32(b0)
-            residual[o, 2] = np.float32(b1)
-            residual[o, 3] = np.float32(b2)
-
-
-@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _slot_weight(slot_ids, slot_w, o, k, lid):
-    """The weight of light ``lid``'s slot in object o, 0 without one (compares only)."""
-    w = 0.0
-    for s in range(k):
-        w = slot_w[o, s] if slot_ids[o, s] == lid else w
-    return w
+    size = 1
+    for r in range(first, end):
+        size = max(size, seg[run[r], 1])
+    rows = np.empty(size, np.int32)
+    for r in range(first, end):
+        o = run[r]
+        a = 0.0
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        m = 0
+        # Every competing light in a slot, none fading: all at weight 1, nothing to add
+        # (half the objects of a city at K = 4).
+        cnt = count[o]
+        if visible[o] and (cnt < candidates[o] or fading[o]):
+            for s in range(cnt):
+                j = slot_rows[o, s]
+                if res_id[j] >= 0:  # (a slot's light left out stays out)
+                    held[j] = slot_w[o, s]
+            # Only the lights not wholly in a slot: t = 0 would add nothing.
+            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
+                j = heap_j[t]
+                if held[j] != 1.0:
+                    rows[m] = j
+                    m += 1
+        if m > SORT_FEW:
+            rows[:m].sort()
+        elif m > 1:
+            for i in range(1, m):
+                j = rows[i]
+                at = i
+                while at > 0 and rows[at - 1] > j:
+                    rows[at] = rows[at - 1]
+                    at -= 1
+                rows[at] = j
+        if m:
+            ex = hi[o, 0] - lo[o, 0]
+            ey = hi[o, 1] - lo[o, 1]
+            ez = hi[o, 2] - lo[o, 2]
+            e2 = ex * ex + ey * ey + ez * ez
+            geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
+                   (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
+                   (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
+            for i in range(m):
+                j = rows[i]
+                e, u0, u1, u2 = residual_term(hot, lf, j, geo)
+                t = (1.0 - held[j]) * e
+                a += t
+                b0 += t * u0
+                b1 += t * u1
+                b2 += t * u2
+        if visible[o] and (cnt < candidates[o] or fading[o]):
+            for s in range(cnt):
+                j = slot_rows[o, s]
+                if res_id[j] >= 0:
+                    held[j] = 0.0
+        residual[o, 0] = np.float32(a)
+        residual[o, 1] = np.float32(b0)
+        residual[o, 2] = np.float32(b1)
+        residual[o, 3] = np.float32(b2)
 
 
 def residual_ids(live_id: np.ndarray, shadows: np.ndarray, skip: bool,
@@ -443,7 +461,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                                   buffers.scratch("res_id", n_l, np.int32)[:n_l])
             residual_pass(run, read_only_view(visible), ResidualInputs(
                 cache.seg, cache.heap.light_row, res_id, packed.rows.hot, packed.rows.f,
-                objects.bounds_min, objects.bounds_max, packed.origin, out["light_ids"],
+                objects.bounds_min, objects.bounds_max, packed.origin, out["light_index"],
                 objects.get("slot_weight"), out["count"], out["candidates"], fading),
                 out["residual"])
         else:
