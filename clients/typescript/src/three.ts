@@ -78,6 +78,18 @@ function values(v: Values | undefined): ArrayLike<number> | undefined {
   return "dtype" in v && "data" in v ? (v.data as unknown as ArrayLike<number>) : (v as ArrayLike<number>);
 }
 
+/** The index of ``id`` in ascending ``ids`` (a binary search), -1 if absent. */
+function indexOfId(ids: ArrayLike<number>, id: number): number {
+  let lo = 0;
+  let hi = ids.length;
+  while (lo < hi) {
+    const mid = (lo + hi) >>> 1;
+    if (ids[mid] < id) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo < ids.length && ids[lo] === id ? lo : -1;
+}
+
 /** The light fields the shader needs (DESIGN section 1), plus a display color. */
 export interface LightFields {
   id: Values;
@@ -131,14 +143,7 @@ export class LightTable {
 
   /** The row of light ``id`` (-1 if absent). */
   row(id: number): number {
-    let lo = 0;
-    let hi = this.ids.length;
-    while (lo < hi) {
-      const mid = (lo + hi) >>> 1;
-      if (this.ids[mid] < id) lo = mid + 1;
-      else hi = mid;
-    }
-    return lo < this.ids.length && this.ids[lo] === id ? lo : -1;
+    return indexOfId(this.ids, id);
   }
 
   /** Replaces the lights (as Session.setLights does); rows in any order. */
@@ -506,14 +511,7 @@ export class ScheduledInstances {
 
   /** The instance (frame row) of object ``id``, -1 if it is not one of these. */
   instanceOf(id: number): number {
-    let lo = 0;
-    let hi = this.ids.length;
-    while (lo < hi) {
-      const mid = (lo + hi) >>> 1;
-      if (this.ids[mid] < id) lo = mid + 1;
-      else hi = mid;
-    }
-    return lo < this.ids.length && this.ids[lo] === id ? lo : -1;
+    return indexOfId(this.ids, id);
   }
 }
 
