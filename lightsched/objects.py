@@ -328,7 +328,8 @@ def _residual_chunk(run, first, end, visible, inputs, held, residual):
         # Every competing light in a slot, none fading: all at weight 1, nothing to add
         # (half the objects of a city at K = 4).
         cnt = count[o]
-        if visible[o] and (cnt < candidates[o] or fading[o]):
+        summed = visible[o] and (cnt < candidates[o] or fading[o])
+        if summed:
             for s in range(cnt):
                 j = slot_rows[o, s]
                 if res_id[j] >= 0:  # (a slot's light left out stays out)
@@ -365,7 +366,7 @@ def _residual_chunk(run, first, end, visible, inputs, held, residual):
                 b0 += t * u0
                 b1 += t * u1
                 b2 += t * u2
-        if visible[o] and (cnt < candidates[o] or fading[o]):
+        if summed:  # the table back as the block had it
             for s in range(cnt):
                 j = slot_rows[o, s]
                 if res_id[j] >= 0:
