@@ -54,13 +54,12 @@ if TYPE_CHECKING:
     from .shadows import ShadowSet
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
-SORT_FEW = 16                # the residual pass sorts more lights than this with numpy's sort
-RESIDUAL_BLOCKS = 16         # the residual pass's work items at most (each has an [L] table)
+SORT_FEW = 16                # residual_row sorts more lights than this with numpy's argsort
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
-# Those of the object pass: all but the residual, which the residual pass writes after it
-# (simd.held_row takes the object pass's outputs as they are).
+# Those of ObjectOutputs: all but the residual, which the pass writes through Residual
+# (simd.held_row takes ObjectOutputs as they are).
 PASS_WRITTEN = tuple(name for name in WRITTEN if name != "residual")
 # The object pass's output arrays: PASS_WRITTEN (DESIGN section 3), each [N, K] or [N],
 # and ``fading`` bool [N], whether a slot of the object is fading in or out.
@@ -108,7 +107,8 @@ def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_static):
+def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, residual,
+                k_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
@@ -118,11 +118,13 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
     (group.PairHeap): the pair cache; live_id = per light
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
-    SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; k_static = a
+    SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
+    Residual (residual_row, once a row's slots are written); k_static = a
     tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows; visible, reset:
     bool [N]; live_id: int32 [L].
 
-    DESIGN section 2, "Slots" (candidates), "Selection", "Fade" and "slot_shadow[o, k]";
+    DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
+    "Residual";
     section 3 (the per-object outputs and their empty slots); section 6 (only ``run``).
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
@@ -132,49 +134,67 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
     (83% of a full (100k, 10k) frame's rows), and those whose slots only fade in, go
     through simd.held_row, one vector store an output row; the rest run the code below.
     """
+    shadow_of_row, max_shadowed = shadow.shadow_of_row, shadow.max_shadowed
+    any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
+    n_run = run.shape[0]
+    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
+    held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0),
+                  params.hysteresis, params.hysteresis_abs, params.fade_in_step, params.fade_in)
+    for ch in nb.prange(n_chunks):
+        # A call a chunk: the rows' code is inlined in it, where numba's parallel analysis
+        # of a prange body cannot follow it, and a call a row would count the references
+        # of its arrays atomically, on lines both threads write.
+        _object_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK), objs, seg,
+                      heap, live_id, state, out, params, held_rules, residual, k_static)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params, held_rules,
+                  residual, k_static):
+    """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
+    how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
+    dt/fade_in, fade_in); the others as object_pass's."""
     visible, reset = objs
     heap_p, heap_j = heap.p, heap.light_row
     s_id, s_w, s_st, s_sel = state.light_ids, state.weight, state.state, state.selected
     o_ids, o_index, o_prio, o_w = out.light_ids, out.light_index, out.priority, out.fade_weight
     o_st, o_count, o_cand, o_shadow = out.fade_state, out.count, out.candidates, out.slot_shadow
     o_fading = out.fading
-    shadow_of_row, max_shadowed = shadow.shadow_of_row, shadow.max_shadowed
-    any_shadow = max_shadowed > 0 and shadow_of_row.max() >= 0 if shadow_of_row.size else False
+    shadow_of_row, max_shadowed = held_rules[0], held_rules[1]
+    any_shadow = max_shadowed > 0
     h = params.hysteresis
     h_abs = params.hysteresis_abs
     inc = params.fade_in_step
     dec = params.fade_out_step
     fade_in = params.fade_in
     fade_out = params.fade_out
-    n_run = run.shape[0]
     # A common K is a compile-time constant, the length of a tuple (its type holds it):
     # every per-slot loop then has a known trip count, which LLVM unrolls and vectorises
     # whole (bench/RESULTS.md, "Measurements behind the code"). Each such K costs a
     # compilation of this kernel (slow, then cached), so only STATIC_K are; any other K
     # is read from the arrays. (numba.literally would type the kernel again every call.)
     k = len(k_static) if len(k_static) else s_id.shape[1]
-    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
-    held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0), h,
-                  h_abs, inc, fade_in)
-    for ch in nb.prange(n_chunks):
-        sf = np.empty((F_ROWS, k))
-        si = np.empty((I_ROWS, k), np.int64)
-        first, end = ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK)
-        pool_size = k + 1
-        for r in range(first, end):
-            pool_size = max(pool_size, seg[run[r], 1])
-        cf = np.empty((CF_ROWS, pool_size))
-        ci = np.empty((CI_ROWS, pool_size), np.int64)
-        for r in range(first, end):
-            o = run[r]
-            if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
-                # The common case in vector code: slots held in last frame's order.
-                cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), (live_id,), state,
-                                out, held_rules)
-                if cand >= 0:
-                    o_count[o] = min(cand, k)
-                    o_cand[o] = cand
-                    continue
+    sf = np.empty((F_ROWS, k))
+    si = np.empty((I_ROWS, k), np.int64)
+    pool_size = k + 1
+    for r in range(first, end):
+        pool_size = max(pool_size, seg[run[r], 1])
+    cf = np.empty((CF_ROWS, pool_size))
+    ci = np.empty((CI_ROWS, pool_size), np.int64)
+    res_rows = np.empty(pool_size, np.int64)
+    res_rho = np.empty(pool_size)
+    for r in range(first, end):
+        o = run[r]
+        cand = -1
+        if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
+            # The common case in vector code: slots held in last frame's order.
+            cand = held_row(o, seg[o, 0], seg[o, 1], (heap_p, heap_j), (live_id,), state,
+                            out, held_rules)
+            if cand >= 0:
+                o_count[o] = min(cand, k)
+                o_cand[o] = cand
+                summed = cand > k or o_fading[o]
+        if cand < 0:
             cnt = 0
             nbest = 0
             cand = 0
@@ -253,104 +273,76 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, k_sta
             o_fading[o] = fading
             if any_shadow and cnt:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
+            summed = visible[o] and (cand > cnt or fading)
+        residual_row(o, (heap_j, seg[o, 0], seg[o, 0] + seg[o, 1]), residual.on and summed,
+                     k, (o_index, s_w), residual, (res_rows, res_rho))
 
 
-class ResidualInputs(NamedTuple):
-    """What the residual pass reads (DESIGN section 2, "Residual")."""
+class Residual(NamedTuple):
+    """What the object pass reads for the residual, and where it writes it (DESIGN section
+    2, "Residual")."""
 
-    seg: np.ndarray          # int64 [N, 2]: (start, length) of each object's pairs
-    light_row: np.ndarray    # int32 [H]: the pair heap's light rows (group.PairHeap)
+    on: bool                 # Config.residual (off: the rows are written 0)
     res_id: np.ndarray       # int32 [L]: per light row its id if it counts, else -2
     hot: np.ndarray          # float64 [L, 8]: priority.PackedLights.hot
     lf: np.ndarray           # float64 [L, 8]: priority.PackedLights.f
     bounds_min: np.ndarray   # float64 [N, 3]: the object store's
     bounds_max: np.ndarray   # float64 [N, 3]
     origin: np.ndarray       # float64 [3]: the packed rows' origin (0 in exact precision)
-    slot_rows: np.ndarray    # int32 [N, K]: this frame's light_index (the object pass's)
-    slot_weight: np.ndarray  # float64 [N, K]: this frame's slot weights, by slot
-    count: np.ndarray        # int32 [N]: this frame's count (the object pass's) ...
-    candidates: np.ndarray   # int32 [N]: ... candidates ...
-    fading: np.ndarray       # bool [N]: ... and whether a slot is fading
+    residual: np.ndarray     # float32 [N, 4]: the output
 
 
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def residual_pass(run, visible, inputs, residual):
-    """residual[o] for the object rows ``run`` (ascending, parallel in chunks) once the
-    object pass has written their slots: over o's cached pairs whose light counts
-    (res_id >= 0: live, and with unshadowed = "skip" not a light with shadows), in
-    ascending light row (= ascending id), t = (1 - w_l) * E_l with w_l the float64 weight
-    of l's slot (0 without one) and (E_l, u_l) priority.residual_term's; a += t, b += t u;
-    stored float32. Invisible objects get 0. run: int64 object rows; visible: bool [N];
-    inputs: ResidualInputs; residual: float32 [N, 4], written at ``run``. DESIGN section
-    2, "Residual"; section 3 (residual [N, 4]); section 6 (only ``run``).
-
-    A pass of its own after the object pass rather than inside it: the object pass's
-    common rows go through simd.held_row, whose outputs are fixed vector stores, and the
-    residual reads the slots' final weights, which that pass writes last."""
-    res_id = inputs.res_id
-    n_run = run.shape[0]
-    n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
-    n_l = res_id.shape[0]
-    # Work in blocks of chunks, each with its own table by light row of the weight that
-    # keeps a light out of the sum: 1 for lights that do not count, and while an object
-    # is summed, its slots' weights. One load a pair, where matching each pair's id
-    # against the K slots took most of the pass.
-    n_blocks = min(n_chunks, RESIDUAL_BLOCKS)
-    for blk in nb.prange(n_blocks):
-        held = np.empty(n_l)
-        for j in range(n_l):
-            held[j] = 1.0 if res_id[j] < 0 else 0.0
-        for ch in range(blk, n_chunks, n_blocks):
-            _residual_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK),
-                            visible, inputs, held, residual)
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _residual_chunk(run, first, end, visible, inputs, held, residual):
-    """residual_pass on run[first:end]; held: the block's table (float64 [L]), as it
-    left it. DESIGN section 2, "Residual"."""
-    seg, heap_j, res_id = inputs.seg, inputs.light_row, inputs.res_id
-    hot, lf, lo, hi, origin = inputs.hot, inputs.lf, inputs.bounds_min, inputs.bounds_max, \
-        inputs.origin
-    slot_rows, slot_w = inputs.slot_rows, inputs.slot_weight
-    count, candidates, fading = inputs.count, inputs.candidates, inputs.fading
-    size = 1
-    for r in range(first, end):
-        size = max(size, seg[run[r], 1])
-    rows = np.empty(size, np.int32)
-    for r in range(first, end):
-        o = run[r]
-        a = 0.0
-        b0 = 0.0
-        b1 = 0.0
-        b2 = 0.0
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def residual_row(o, pairs, summed, k, slots, res, scratch):
+    """residual[o] once the object pass has written o's slots: over o's cached pairs whose
+    light counts (res_id >= 0: live, and with unshadowed = "skip" not a light with
+    shadows), in ascending light row (= ascending id), t = (1 - w_l) * E_l with w_l the
+    float64 weight of l's slot (0 without one) and (E_l, u_l) priority.residual_term's;
+    a += t, b += t u; stored float32. o: the object row; pairs = (the pair heap's light
+    rows, int32 [H]; o's first pair; its end); summed: whether any competing light is not
+    wholly in a slot (a competing light without a slot, or a slot fading), else the row
+    is 0, as it is for an invisible object; k: K; slots = (this frame's light_index, int32
+    [N, K]; the slots' float64 weights [N, K]); res: Residual; scratch = (rows int64,
+    rho float64), each of at least o's pairs. DESIGN section 2, "Residual"; section 3
+    (residual [N, 4])."""
+    heap_j, first, end = pairs
+    slot_rows, slot_w = slots
+    rows, rho = scratch
+    a = 0.0
+    b0 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    if summed:
+        res_id = res.res_id
         m = 0
-        # Every competing light in a slot, none fading: all at weight 1, nothing to add
-        # (half the objects of a city at K = 4).
-        cnt = count[o]
-        summed = visible[o] and (cnt < candidates[o] or fading[o])
-        if summed:
-            for s in range(cnt):
-                j = slot_rows[o, s]
-                if res_id[j] >= 0:  # (a slot's light left out stays out)
-                    held[j] = slot_w[o, s]
+        for t in range(first, end):
+            j = np.int64(heap_j[t])
+            # The slot's weight by a sum over the K slots: light rows are unique, and it
+            # vectorises where a search would branch a pair.
+            w = 0.0
+            for s in range(k):
+                w += slot_w[o, s] if slot_rows[o, s] == j else 0.0
+            rows[m] = j
+            rho[m] = 1.0 - w
             # Only the lights not wholly in a slot: t = 0 would add nothing.
-            for t in range(seg[o, 0], seg[o, 0] + seg[o, 1]):
-                j = heap_j[t]
-                if held[j] != 1.0:
-                    rows[m] = j
-                    m += 1
+            m += (res_id[j] >= 0) & (w < 1.0)
         if m > SORT_FEW:
-            rows[:m].sort()
-        elif m > 1:
+            order = np.argsort(rows[:m])
+            rows[:m] = rows[:m][order]
+            rho[:m] = rho[:m][order]
+        else:
             for i in range(1, m):
                 j = rows[i]
+                x = rho[i]
                 at = i
                 while at > 0 and rows[at - 1] > j:
                     rows[at] = rows[at - 1]
+                    rho[at] = rho[at - 1]
                     at -= 1
                 rows[at] = j
+                rho[at] = x
         if m:
+            lo, hi, origin = res.bounds_min, res.bounds_max, res.origin
             ex = hi[o, 0] - lo[o, 0]
             ey = hi[o, 1] - lo[o, 1]
             ez = hi[o, 2] - lo[o, 2]
@@ -359,27 +351,22 @@ def _residual_chunk(run, first, end, visible, inputs, held, residual):
                    (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
                    (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
             for i in range(m):
-                j = rows[i]
-                e, u0, u1, u2 = residual_term(hot, lf, j, geo)
-                t = (1.0 - held[j]) * e
+                e, u0, u1, u2 = residual_term(res.hot, res.lf, rows[i], geo)
+                t = rho[i] * e
                 a += t
                 b0 += t * u0
                 b1 += t * u1
                 b2 += t * u2
-        if summed:  # the table back as the block had it
-            for s in range(cnt):
-                j = slot_rows[o, s]
-                if res_id[j] >= 0:
-                    held[j] = 0.0
-        residual[o, 0] = np.float32(a)
-        residual[o, 1] = np.float32(b0)
-        residual[o, 2] = np.float32(b1)
-        residual[o, 3] = np.float32(b2)
+    out = res.residual
+    out[o, 0] = np.float32(a)
+    out[o, 1] = np.float32(b0)
+    out[o, 2] = np.float32(b1)
+    out[o, 3] = np.float32(b2)
 
 
 def residual_ids(live_id: np.ndarray, shadows: np.ndarray, skip: bool,
                  out: np.ndarray | None = None) -> np.ndarray:
-    """residual_pass's res_id: live_id, with the lights that have shadows at -2 too under
+    """The residual's res_id (Residual): live_id, with the lights that have shadows at -2 too under
     unshadowed = "skip" (the residual has no shadow to keep them out of a wall's lee)."""
     if not skip:
         return live_id
@@ -453,20 +440,15 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                                          config.fade_in, config.fade_out)))
         n_l = len(lights)
         live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
+        res_id = residual_ids(live_id, lights.shadows, config.unshadowed == "skip",
+                              buffers.scratch("res_id", n_l, np.int32)[:n_l])
         object_pass(run, (read_only_view(visible), reset), cache.seg, cache.heap, live_id,
                     state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
+                    Residual(bool(config.residual), res_id, packed.rows.hot, packed.rows.f,
+                             objects.bounds_min, objects.bounds_max, packed.origin,
+                             out["residual"]),
                     (0,) * k if k in STATIC_K else ())
-        if config.residual:
-            res_id = residual_ids(live_id, lights.shadows, config.unshadowed == "skip",
-                                  buffers.scratch("res_id", n_l, np.int32)[:n_l])
-            residual_pass(run, read_only_view(visible), ResidualInputs(
-                cache.seg, cache.heap.light_row, res_id, packed.rows.hot, packed.rows.f,
-                objects.bounds_min, objects.bounds_max, packed.origin, out["light_index"],
-                objects.get("slot_weight"), out["count"], out["candidates"], fading),
-                out["residual"])
-        else:
-            out["residual"][run] = 0.0
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])
     objects.put("was_visible", visible)

@@ -363,8 +363,11 @@ def residual_term(hot, lf, j, geo):
     hot, lf: PackedLights' rows; j: the light's row; geo as record_geometry gives it, in
     the packed rows' frame. DESIGN section 2, "Residual" (its per-light term; the
     residual pass of objects.py sums them)."""
-    if (np.int64(hot[j, 5]) >> 3) & 3 == DIRECTIONAL:
+    typ = (np.int64(hot[j, 5]) >> 3) & 3
+    if typ == DIRECTIONAL:
         return hot[j, 6], -lf[j, 0], -lf[j, 1], -lf[j, 2]
+    # Without a branch a light (but the spot's cone): whether the centre is in range is
+    # no better predicted than a coin, and w = 0 makes E = 0 by itself.
     v0 = hot[j, 0] - geo[0]
     v1 = hot[j, 1] - geo[1]
     v2 = hot[j, 2] - geo[2]
@@ -373,17 +376,12 @@ def residual_term(hot, lf, j, geo):
     r = hot[j, 3]
     q = dc2 / (r * r)
     w = max(0.0, 1.0 - q * q)
-    if w == 0.0:
-        # The centre out of range: E = 0, and t = 0 adds nothing whatever u is.
-        return 0.0, 0.0, 0.0, 0.0
     e = hot[j, 6] * w * w / (dc2 + R0 * R0)
-    if (np.int64(hot[j, 5]) >> 3) & 3 == SPOT:
+    if typ == SPOT and w > 0.0:
         e = e * spot_cone(hot, lf, j, geo, True)[1]
-    if vv == 0.0:
-        # (Also when v is so short that its square underflows: no direction either.)
-        return e, 0.0, 0.0, 0.0
-    n = math.sqrt(vv)
-    return e, v0 / n, v1 / n, v2 / n
+    # vv = 0 (also when v is so short that its square underflows): no direction.
+    inv = 1.0 / math.sqrt(vv) if vv > 0.0 else 0.0
+    return e, v0 * inv, v1 * inv, v2 * inv
 
 
 __all__ = ["MODEL_CONTRIBUTION", "MODEL_THESIS", "box_d2", "falloff", "pack_lights",

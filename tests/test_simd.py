@@ -32,6 +32,7 @@ from lightsched.jit import OBJECT_CHUNK, PRANGE_ONLY
 from lightsched.objects import (
     FadeParams,
     ObjectOutputs,
+    Residual,
     SlotShadows,
     SlotState,
     live_ids,
@@ -203,13 +204,29 @@ def pass_arguments(rng, objects, live_id, shadow_of_row, max_shadowed, fade_in=0
     heap = PairHeap(np.concatenate(heap_p), np.concatenate(heap_j).astype(np.int32))
     return (np.arange(n, dtype=np.int64), (visible, reset), seg, heap, live_id,
             SlotState(s_id, s_w, s_st, s_sel), out, params,
-            SlotShadows(shadow_of_row, int(max_shadowed)),
+            SlotShadows(shadow_of_row, int(max_shadowed)), residual_arguments(rng, n, live_id),
             (0,) * k)
+
+
+def residual_arguments(rng, n, live_id):
+    """object_pass's Residual for n objects of boxes round the origin and point lights
+    (intensity 1-10, radius 2-20) near them: most centres in range, some not; the lights
+    of even rows count, the others do not (as a light with shadows under "skip")."""
+    n_l = live_id.size
+    hot = np.zeros((n_l, 8))
+    hot[:, :3] = rng.uniform(-6, 6, (n_l, 3))
+    hot[:, 3] = rng.uniform(2, 20, n_l)
+    hot[:, 5] = POINT << 3
+    hot[:, 6] = rng.uniform(1, 10, n_l)
+    lo = rng.uniform(-4, 4, (n, 3))
+    res_id = np.where(np.arange(n_l) % 2 == 0, live_id, -2).astype(np.int32)
+    return Residual(True, res_id, hot, np.zeros((n_l, 8)), lo, lo + rng.uniform(0, 2, (n, 3)),
+                    np.zeros(3), np.full((n, 4), -9.0, np.float32))
 
 
 def held_rules(case):
     """held_row's rules for a case of pass_arguments, as object_pass makes them."""
-    _, _, _, _, _, _, _, params, (shadow_of_row, max_shadowed), _ = case
+    _, _, _, _, _, _, _, params, (shadow_of_row, max_shadowed), _, _ = case
     q = max_shadowed if (shadow_of_row >= 0).any() and max_shadowed > 0 else 0
     return (shadow_of_row, np.int64(q), params[0], params[1], params[2], params[4])
 
@@ -220,16 +237,18 @@ def check_held(case, kinds, packings):
     bit for bit; and held_row alone, for each packing, gives each object's row of them
     or -1 with nothing written, and takes every "held" and "fading" object of 1-8 pairs,
     or of 9-16 pairs with more than 8 competing."""
-    run, objs, seg, heap, live_id, state, out, params, shadow, k_static = case
+    run, objs, seg, heap, live_id, state, out, params, shadow, residual, k_static = case
     strided = np.zeros(2 * heap.p.size)[::2]
     strided[:] = heap.p
-    want = copy.deepcopy((state, out))
-    object_pass(run, objs, seg, PairHeap(strided, heap.light_row), live_id, *want, params,
-                shadow, k_static)
-    got = copy.deepcopy((state, out))
-    object_pass(run, objs, seg, heap, live_id, *got, params, shadow, k_static)
-    for w, g in zip(want[0] + want[1], got[0] + got[1], strict=True):
+    want = copy.deepcopy((state, out, residual))
+    object_pass(run, objs, seg, PairHeap(strided, heap.light_row), live_id, *want[:2], params,
+                shadow, want[2], k_static)
+    got = copy.deepcopy((state, out, residual))
+    object_pass(run, objs, seg, heap, live_id, *got[:2], params, shadow, got[2], k_static)
+    for w, g in zip(want[0] + want[1] + (want[2].residual,),
+                    got[0] + got[1] + (got[2].residual,), strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
+    assert not (got[2].residual == -9).any()
     rules = held_rules(case)
     for packing in packings:
         for o, kind in enumerate(kinds):
@@ -709,6 +728,12 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     kinds = list(rng.choice(HELD_KINDS, 300))
     case = held_case(rng, kinds, 40, 2, False)
     check_held(case, kinds, PACKINGS)
+    # The residual of held objects (their rows written after held_row) is among what
+    # check_held compared: some have lights past K or fading slots, and so a residual.
+    args = copy.deepcopy(case)
+    object_pass(*args)
+    held = np.array([kind in ("held", "fading") for kind in kinds]) & (case[2][:, 1] <= 16)
+    assert (args[9].residual[held, 0] > 0).sum() >= 10
     seg = case[2]
     taken = [HELD[PACKINGS[-1]](o, seg[o, 0], seg[o, 1], tuple(case[3]), (case[4],),
                                 *copy.deepcopy((case[5], case[6])), held_rules(case))
