@@ -166,17 +166,24 @@ def light_at_points(lights: Any, rows: np.ndarray, x: np.ndarray, n: np.ndarray)
     return out
 
 
-def pair_lighting(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
-                  light: np.ndarray, chunk: int = 16384) -> np.ndarray:
-    """Lighting of each (object row, light row) pair summed over the object's sample points
-    (``face_samples``), at full weight: (P,)."""
+def pair_lighting_points(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
+                         light: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    """Lighting of each (object row, light row) pair at each of the object's sample points
+    (``face_samples``), at full weight: (P, M)."""
     obj = np.asarray(obj, np.int64)
     light = np.asarray(light, np.int64)
-    out = np.empty(obj.size)
+    out = np.empty((obj.size, points.shape[1]))
     for s in range(0, obj.size, chunk):
         o, lt = obj[s:s + chunk], light[s:s + chunk]
-        out[s:s + chunk] = light_at_points(lights, lt, points[o], normals).sum(-1)
+        out[s:s + chunk] = light_at_points(lights, lt, points[o], normals)
     return out
+
+
+def pair_lighting(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
+                  light: np.ndarray) -> np.ndarray:
+    """Lighting of each (object row, light row) pair summed over the object's sample points
+    (``face_samples``), at full weight: (P,)."""
+    return pair_lighting_points(lights, points, normals, obj, light).sum(-1)
 
 
 def affecting_pairs(lights: Any, objects: Any, obj_rows: np.ndarray, light_rows: np.ndarray,
@@ -285,6 +292,15 @@ def popping(now: np.ndarray, before: np.ndarray, ref: np.ndarray, step: float = 
     return float(change.sum()), float(change[pop].sum()), int(pop.sum()), float(now.sum())
 
 
+def group_sum(group: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Rows of ``values`` (S, ...) summed by ``group`` (S,), ascending, in 0..n-1: (n, ...)."""
+    out = np.zeros((n, *values.shape[1:]))
+    if group.size:
+        starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+        out[group[starts]] = np.add.reduceat(values, starts, axis=0)
+    return out
+
+
 class LightingTable:
     """One frame's lighting of every affecting (object, light) pair, and what a selection
     delivers. Pairs are sorted by object row then light row; ``n_obj`` object rows."""
@@ -294,7 +310,8 @@ class LightingTable:
         self.lights, self.points, self.normals = lights, points, normals
         self.obj, self.light = obj, light
         self.n_obj, self.n_lights = n_obj, len(lights)
-        self.e = pair_lighting(lights, points, normals, obj, light)
+        self.ep = pair_lighting_points(lights, points, normals, obj, light)  # (P, M)
+        self.e = self.ep.sum(-1)
         self.key = obj * self.n_lights + light
         # Per object: its pairs by lighting descending (ties: lower light row), and ranks.
         order = np.lexsort((light, -self.e, obj))
@@ -307,39 +324,62 @@ class LightingTable:
         """Per object row: the lighting of every affecting light together."""
         return np.bincount(self.obj, self.e, minlength=self.n_obj)
 
+    def all_lights_points(self, rows: np.ndarray) -> np.ndarray:
+        """Per object row of ``rows`` (ascending) and sample point: the lighting of every
+        affecting point and spot light together, (len(rows), M)."""
+        return group_sum(np.searchsorted(rows, self.obj), self.ep, rows.size)
+
     def best(self, k: int) -> np.ndarray:
         """Per object row: the lighting of its best ``k`` affecting lights."""
         keep = self._rank < k
         idx = self._by_e[keep]
         return np.bincount(self.obj[idx], self.e[idx], minlength=self.n_obj)
 
-    def lookup(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
-        """Lighting of (object row, light row) pairs; pairs that are not affecting pairs
-        (a light that left the object's range or the view) are computed directly."""
-        key = obj.astype(np.int64) * self.n_lights + light
-        pos = np.searchsorted(self.key, key)
-        pos_c = np.minimum(pos, max(self.key.size - 1, 0))
-        found = (pos < self.key.size) & (self.key[pos_c] == key) if self.key.size else \
-            np.zeros(key.size, bool)
-        out = np.where(found, self.e[pos_c] if self.key.size else 0.0, 0.0)
+    def find(self, obj: np.ndarray, light: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of (object row, light row) pairs among the affecting pairs, and whether
+        each was found (positions of pairs not found are meaningless)."""
+        key = np.asarray(obj, np.int64) * self.n_lights + np.asarray(light, np.int64)
+        if self.key.size == 0:
+            return np.zeros(key.size, np.int64), np.zeros(key.size, bool)
+        pos = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)
+        return pos, self.key[pos] == key
+
+    def lookup_points(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """Lighting of (object row, light row) pairs at the object's sample points, (S, M);
+        pairs that are not affecting pairs (a light that left the object's range or the
+        view) are computed directly."""
+        pos, found = self.find(obj, light)
+        out = np.zeros((pos.size, self.points.shape[1]))
+        out[found] = self.ep[pos[found]]
         if not found.all():
             miss = ~found
             self.missing += int(miss.sum())
-            out[miss] = pair_lighting(self.lights, self.points, self.normals, obj[miss],
-                                      light[miss])
+            out[miss] = pair_lighting_points(self.lights, self.points, self.normals, obj[miss],
+                                             light[miss])
         return out
+
+    def lookup(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """Lighting of (object row, light row) pairs summed over the sample points."""
+        return self.lookup_points(obj, light).sum(-1)
+
+    def selection_points(self, rows: np.ndarray, light_index: np.ndarray, weight: np.ndarray
+                         ) -> tuple[np.ndarray, int]:
+        """Per object row of ``rows`` and sample point: the lighting of its slots (light
+        rows ``light_index[row]``, -1 empty) weighted by ``weight[row]``, (len(rows), M);
+        and how many slot lights were not affecting lights of this frame (computed
+        directly)."""
+        li = light_index[rows]
+        occupied = li >= 0
+        local = np.repeat(np.arange(rows.size), occupied.sum(1))
+        before = self.missing
+        e = self.lookup_points(rows[local], li[occupied]) * weight[rows][occupied][:, None]
+        return group_sum(local, e, rows.size), self.missing - before
 
     def selection(self, rows: np.ndarray, light_index: np.ndarray, weight: np.ndarray
                   ) -> tuple[np.ndarray, int]:
-        """Per object row of ``rows``: the lighting of its slots (light rows
-        ``light_index[row]``, -1 empty) weighted by ``weight[row]``; and how many slot
-        lights were not affecting lights of this frame (computed directly)."""
-        li = light_index[rows]
-        occupied = li >= 0
-        o = np.repeat(rows, occupied.sum(1))
-        before = self.missing
-        e = self.lookup(o, li[occupied]) * weight[rows][occupied]
-        return np.bincount(o, e, minlength=self.n_obj)[rows], self.missing - before
+        """``selection_points`` summed over each object's sample points: (len(rows),)."""
+        pts, miss = self.selection_points(rows, light_index, weight)
+        return pts.sum(1), miss
 
     def top_by(self, key: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
         """light_index [N, K] of the policy that takes, per object, the ``k`` affecting
