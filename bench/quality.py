@@ -1753,13 +1753,18 @@ def onoff(on: bool) -> str:
 
 
 def residual_table(res: dict[str, Any]) -> list[str]:
-    head = ["K", "fade", "residual", "lighting error", "abrupt pops / 1000 obj-s",
+    head = ["K", "fade", "residual", "lighting error", "of point and spot lights",
+            "abrupt pops / 1000 obj-s",
             "of which unlit (A = 0)", "pops against the object's mean A", "summed popping %/s",
             "frame ms", "residual's cost"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    # Directional lights are the same in D and A, so |D - A| is the same without them; only
+    # sum A shrinks.
+    spot_point = 1.0 - res["metrics"]["sun_share"]
     for (fade, on, k), r in res["rows"].items():
         cost = f"{r['cost_ms']:+.2f} ms ({100 * r['cost']:+.0f}%)" if on else ""
-        out.append(f"| {k} | {fade} | {onoff(on)} | {pct(r['error'])} | {r['pops']:.2f} | "
+        out.append(f"| {k} | {fade} | {onoff(on)} | {pct(r['error'])} | "
+                   f"{pct(r['error'] / spot_point) if spot_point > 0 else '-'} | {r['pops']:.2f} | "
                    f"{r['unlit_pops']:.2f} | {r['mean_pops']:.2f} | {per_s(r['popping'])} | "
                    f"{r['ms']:.2f} | {cost} |")
     return out
@@ -1856,7 +1861,7 @@ def residual_plot(rres: list[dict[str, Any]], path: Any) -> None:
                     for p in pts:
                         ax.annotate(f"K={p['k']}", (p["ms"], 100 * p["error"]), fontsize=7,
                                     xytext=(3, 3), textcoords="offset points")
-        ax.set_yscale("log")
+        ax.set_yscale("symlog", linthresh=0.01)
         ax.set_xlabel("Scheduler.frame median (ms)")
         ax.set_ylabel("lighting error sum|D - A| / sum A (%)")
         ax.set_title(res["spec"].label, fontsize=10)
@@ -1887,7 +1892,9 @@ def residual_section(rres: list[dict[str, Any]], big: dict[str, float] | None,
            "(b . n)/2), when the run has it on, plus the frame's directional_lights (outside "
            "the slots). Each light's term is the Lambert term of the windowed falloff at the "
            "point (`light_at_points`). **lighting error** = sum |D - A| / sum A over every "
-           "measured (frame, object, point). **abrupt pops**: an object-frame (visible on "
+           "measured (frame, object, point); \"of point and spot lights\": the same with the "
+           "directional lights left out of A (they are the same in D, so only sum A changes; "
+           "a diagnostic, not DESIGN's metric). **abrupt pops**: an object-frame (visible on "
            "this and the last frame) pops when at any of its points |(D_t - D_t-1) - (A_t - "
            f"A_t-1)| > {POP_SHARE:g} max(A_t, A_t-1); counted per 1000 such object-seconds at "
            "dt = 1/60 s; \"of which unlit\": the object-frames whose popping points all have "
