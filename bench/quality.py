@@ -1234,9 +1234,12 @@ def big_frame_cost(n: int, n_lights: int, k: int, frames: int) -> dict[str, floa
     from pathlib import Path
 
     script = Path(__file__).resolve().parent / "residual_cost.py"
+    load0 = os.getloadavg()[0]
     done = subprocess.run([sys.executable, str(script), "--child", str(n), str(n_lights), str(k),
                            str(frames)], capture_output=True, text=True, check=True)
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    # The share depends on the machine's load: contention stretches the whole frame more
+    # than the residual's pass, so the load goes beside the figure.
+    return {**json.loads(done.stdout.strip().splitlines()[-1]), "load": (load0, os.getloadavg()[0])}
 
 
 # =========================================================================== study
@@ -1931,7 +1934,8 @@ def residual_section(rres: list[dict[str, Any]], big: dict[str, float] | None,
                 f"{DONE_K} (`bench/residual_cost.py`'s child: every light moving, on and off "
                 f"interleaved in one process, native target): off {big['off']:.2f} ms, on "
                 f"{big['on']:.2f} ms, paired difference {big['diff']:+.2f} ms "
-                f"({100 * big['diff'] / big['off']:+.0f}%).", ""]
+                f"({100 * big['diff'] / big['off']:+.0f}%); 1-minute load average "
+                f"{big['load'][0]:.2f} .. {big['load'][1]:.2f} on {os.cpu_count()} CPUs.", ""]
     out += ["Done when (issue 53), judged from the figures above:", ""] + done_table(checks)
     out += ["", done_answer(checks), "",
             "Plot: `bench/plots/quality_residual.png` (lighting error against frame time "
