@@ -1,8 +1,9 @@
 """Quality: run time against error (DESIGN section 4), the priority policies compared, popping.
 
-    python bench/quality.py            # a few minutes
-    python bench/quality.py --quick    # smaller scenes, fewer frames (< 30 s)
+    python bench/quality.py            # ~15 minutes on a 2-core machine
+    python bench/quality.py --quick    # smaller scenes, fewer frames (about a minute)
     python bench/quality.py --write    # also bench/RESULTS.md and bench/plots/quality_*.png
+    python bench/quality.py --quick --residual-only   # issue 53's part alone (no --write)
 
 The three errors of DESIGN section 4, as computed here (functions below, each with the
 details in its docstring):
@@ -32,6 +33,30 @@ details in its docstring):
   fading in over 15 frames adds E/15 fifteen times, the same E as a one-frame switch), and
   a 0.25 s fade moves an object's lighting by at most 1/15 of one light's share per frame,
   below the step size, so what fade removes shows in the steps, not in the sum.
+
+Issue 53 adds the residual (DESIGN section 2, "Residual") and section 4's lighting error
+and abrupt pops, at the same sample points and normals, for no fade / fade / fade +
+hysteresis, each with the residual off and on, K = 2, 4, 8, in city, stadium and dungeon-22
+(``residual_study``; details in the docstrings):
+
+- lighting error (``lighting_error``): sum |D - A| / sum A over every measured (frame,
+  object, point). A: every light that affects the object (this module's Affects test, the
+  unshadowed rule ignored) and every directional light whose mask it shares, unweighted.
+  D: the slots' lights times their fade weights, plus the frame's residual at the point's
+  normal (``residual_at``: max(0, a/4 + (b . n)/2)) when on, plus the frame's
+  directional_lights. Directional lights are in both (section 4 says so), unlike above.
+- abrupt pops (``abrupt_pops``): a point pops on a frame when |(D_t - D_t-1) - (A_t -
+  A_t-1)| > POP_SHARE * max(A_t, A_t-1), each frame's lighting at its own positions; counted
+  per object-frame (an object visible on both frames pops when any of its points does), per
+  1000 such object-seconds at dt = 1/60. Where A = 0 on both frames the threshold is 0 and
+  any change of D pops; the report says how many pops are of that kind.
+- summed popping: ``popping`` above, with the residual of each side's weights (rebuilt in
+  numpy from DESIGN, ``residual_terms`` and ``residual_vectors``, and checked against the
+  frame's) added to both sides when the run has it on.
+- the residual's cost: paired frame times (on - off, same frame, same lockstep timing pass)
+  per scene and K, and a (100k, 10k) city frame at K = 4 measured by
+  bench/residual_cost.py's child; the issue's conditions at K = 4 judged from the figures
+  (``done_when``), and ``bench/plots/quality_residual.png``.
 
 The affecting lights of every object are found here in numpy by DESIGN's Affects test
 (``affecting_pairs``; range, spot cone, masks, visible lights; checked against the fast
@@ -166,17 +191,24 @@ def light_at_points(lights: Any, rows: np.ndarray, x: np.ndarray, n: np.ndarray)
     return out
 
 
-def pair_lighting(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
-                  light: np.ndarray, chunk: int = 16384) -> np.ndarray:
-    """Lighting of each (object row, light row) pair summed over the object's sample points
-    (``face_samples``), at full weight: (P,)."""
+def pair_lighting_points(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
+                         light: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    """Lighting of each (object row, light row) pair at each of the object's sample points
+    (``face_samples``), at full weight: (P, M)."""
     obj = np.asarray(obj, np.int64)
     light = np.asarray(light, np.int64)
-    out = np.empty(obj.size)
+    out = np.empty((obj.size, points.shape[1]))
     for s in range(0, obj.size, chunk):
         o, lt = obj[s:s + chunk], light[s:s + chunk]
-        out[s:s + chunk] = light_at_points(lights, lt, points[o], normals).sum(-1)
+        out[s:s + chunk] = light_at_points(lights, lt, points[o], normals)
     return out
+
+
+def pair_lighting(lights: Any, points: np.ndarray, normals: np.ndarray, obj: np.ndarray,
+                  light: np.ndarray) -> np.ndarray:
+    """Lighting of each (object row, light row) pair summed over the object's sample points
+    (``face_samples``), at full weight: (P,)."""
+    return pair_lighting_points(lights, points, normals, obj, light).sum(-1)
 
 
 def affecting_pairs(lights: Any, objects: Any, obj_rows: np.ndarray, light_rows: np.ndarray,
@@ -285,6 +317,15 @@ def popping(now: np.ndarray, before: np.ndarray, ref: np.ndarray, step: float = 
     return float(change.sum()), float(change[pop].sum()), int(pop.sum()), float(now.sum())
 
 
+def group_sum(group: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Rows of ``values`` (S, ...) summed by ``group`` (S,), ascending, in 0..n-1: (n, ...)."""
+    out = np.zeros((n, *values.shape[1:]))
+    if group.size:
+        starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+        out[group[starts]] = np.add.reduceat(values, starts, axis=0)
+    return out
+
+
 class LightingTable:
     """One frame's lighting of every affecting (object, light) pair, and what a selection
     delivers. Pairs are sorted by object row then light row; ``n_obj`` object rows."""
@@ -294,7 +335,8 @@ class LightingTable:
         self.lights, self.points, self.normals = lights, points, normals
         self.obj, self.light = obj, light
         self.n_obj, self.n_lights = n_obj, len(lights)
-        self.e = pair_lighting(lights, points, normals, obj, light)
+        self.ep = pair_lighting_points(lights, points, normals, obj, light)  # (P, M)
+        self.e = self.ep.sum(-1)
         self.key = obj * self.n_lights + light
         # Per object: its pairs by lighting descending (ties: lower light row), and ranks.
         order = np.lexsort((light, -self.e, obj))
@@ -307,39 +349,62 @@ class LightingTable:
         """Per object row: the lighting of every affecting light together."""
         return np.bincount(self.obj, self.e, minlength=self.n_obj)
 
+    def all_lights_points(self, rows: np.ndarray) -> np.ndarray:
+        """Per object row of ``rows`` (ascending) and sample point: the lighting of every
+        affecting point and spot light together, (len(rows), M)."""
+        return group_sum(np.searchsorted(rows, self.obj), self.ep, rows.size)
+
     def best(self, k: int) -> np.ndarray:
         """Per object row: the lighting of its best ``k`` affecting lights."""
         keep = self._rank < k
         idx = self._by_e[keep]
         return np.bincount(self.obj[idx], self.e[idx], minlength=self.n_obj)
 
-    def lookup(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
-        """Lighting of (object row, light row) pairs; pairs that are not affecting pairs
-        (a light that left the object's range or the view) are computed directly."""
-        key = obj.astype(np.int64) * self.n_lights + light
-        pos = np.searchsorted(self.key, key)
-        pos_c = np.minimum(pos, max(self.key.size - 1, 0))
-        found = (pos < self.key.size) & (self.key[pos_c] == key) if self.key.size else \
-            np.zeros(key.size, bool)
-        out = np.where(found, self.e[pos_c] if self.key.size else 0.0, 0.0)
+    def find(self, obj: np.ndarray, light: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of (object row, light row) pairs among the affecting pairs, and whether
+        each was found (positions of pairs not found are meaningless)."""
+        key = np.asarray(obj, np.int64) * self.n_lights + np.asarray(light, np.int64)
+        if self.key.size == 0:
+            return np.zeros(key.size, np.int64), np.zeros(key.size, bool)
+        pos = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)
+        return pos, self.key[pos] == key
+
+    def lookup_points(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """Lighting of (object row, light row) pairs at the object's sample points, (S, M);
+        pairs that are not affecting pairs (a light that left the object's range or the
+        view) are computed directly."""
+        pos, found = self.find(obj, light)
+        out = np.zeros((pos.size, self.points.shape[1]))
+        out[found] = self.ep[pos[found]]
         if not found.all():
             miss = ~found
             self.missing += int(miss.sum())
-            out[miss] = pair_lighting(self.lights, self.points, self.normals, obj[miss],
-                                      light[miss])
+            out[miss] = pair_lighting_points(self.lights, self.points, self.normals, obj[miss],
+                                             light[miss])
         return out
+
+    def lookup(self, obj: np.ndarray, light: np.ndarray) -> np.ndarray:
+        """Lighting of (object row, light row) pairs summed over the sample points."""
+        return self.lookup_points(obj, light).sum(-1)
+
+    def selection_points(self, rows: np.ndarray, light_index: np.ndarray, weight: np.ndarray
+                         ) -> tuple[np.ndarray, int]:
+        """Per object row of ``rows`` and sample point: the lighting of its slots (light
+        rows ``light_index[row]``, -1 empty) weighted by ``weight[row]``, (len(rows), M);
+        and how many slot lights were not affecting lights of this frame (computed
+        directly)."""
+        li = light_index[rows]
+        occupied = li >= 0
+        local = np.repeat(np.arange(rows.size), occupied.sum(1))
+        before = self.missing
+        e = self.lookup_points(rows[local], li[occupied]) * weight[rows][occupied][:, None]
+        return group_sum(local, e, rows.size), self.missing - before
 
     def selection(self, rows: np.ndarray, light_index: np.ndarray, weight: np.ndarray
                   ) -> tuple[np.ndarray, int]:
-        """Per object row of ``rows``: the lighting of its slots (light rows
-        ``light_index[row]``, -1 empty) weighted by ``weight[row]``; and how many slot
-        lights were not affecting lights of this frame (computed directly)."""
-        li = light_index[rows]
-        occupied = li >= 0
-        o = np.repeat(rows, occupied.sum(1))
-        before = self.missing
-        e = self.lookup(o, li[occupied]) * weight[rows][occupied]
-        return np.bincount(o, e, minlength=self.n_obj)[rows], self.missing - before
+        """``selection_points`` summed over each object's sample points: (len(rows),)."""
+        pts, miss = self.selection_points(rows, light_index, weight)
+        return pts.sum(1), miss
 
     def top_by(self, key: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
         """light_index [N, K] of the policy that takes, per object, the ``k`` affecting
@@ -371,6 +436,125 @@ def brightest_key(lights: Any, objects: Any, obj: np.ndarray, light: np.ndarray)
     return lights.intensity[light] / (1.0 + UNITY_ATTEN * d2 / lights.radius[light] ** 2)
 
 
+# =========================================================================== residual metrics
+
+POP_SHARE = 0.10  # abrupt pops: a change A does not explain, above this share of A (DESIGN 4)
+
+
+def sphere_spot_factor(lights: Any, rows: np.ndarray, v: np.ndarray, big_r: np.ndarray
+                       ) -> np.ndarray:
+    """s of DESIGN's contribution model for spot light rows ``rows`` and bounding spheres
+    of radius ``big_r`` whose centres are at ``v`` (P, 3) from the light: with n = |v|,
+    a = v . axis, root = sqrt(max(n^2 - R^2, 0)), c = 1 if n <= R or a >= root, else
+    (a root + R sqrt(max(n^2 - a^2, 0))) / n^2; s = clamp((c - cos o)/(cos inner - cos o),
+    0, 1)^2, or [c >= cos o] when inner = o or the cosines are equal."""
+    axis = lights.direction[rows]
+    n = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+    a = v[:, 0] * axis[:, 0] + v[:, 1] * axis[:, 1] + v[:, 2] * axis[:, 2]
+    n2 = n * n
+    root = np.sqrt(np.maximum(n2 - big_r * big_r, 0.0))
+    side = np.sqrt(np.maximum(n2 - a * a, 0.0))
+    whole = (n <= big_r) | (a >= root) | ~(n2 > 0.0)
+    c = np.where(whole, 1.0, (a * root + big_r * side) / np.where(n2 > 0.0, n2, 1.0))
+    # math.cos, as the oracle: np.cos may differ in the last bit.
+    cos_all_o = np.array([math.cos(float(x)) for x in lights.outer_angle])
+    cos_all_i = np.array([math.cos(float(x)) for x in lights.inner_angle])
+    cos_o, cos_i = cos_all_o[rows], cos_all_i[rows]
+    step = (lights.inner_angle[rows] == lights.outer_angle[rows]) | (cos_i == cos_o)
+    t = np.clip((c - cos_o) / np.where(step, 1.0, cos_i - cos_o), 0.0, 1.0)
+    return np.where(step, (c >= cos_o).astype(np.float64), t * t)
+
+
+def residual_terms(lights: Any, objects: Any, obj: np.ndarray, light: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(E_l, u_l) of DESIGN section 2, "Residual", for (object row, light row) pairs: the
+    light over the whole object, from its box centre c. v = p - c, dc2 = max(v . v, R^2)
+    with R = |hi - lo| / 2, q = dc2 / r^2, w = max(0, 1 - q^2), E = i w^2 / (dc2 + r0^2) * s
+    (``sphere_spot_factor`` for spots, 1 for point lights; no g, no p_user), u = v / |v|,
+    (0, 0, 0) when v . v = 0; directional: E = i, u = -direction. Returns E (P,), u (P, 3)."""
+    obj = np.asarray(obj, np.int64)
+    light = np.asarray(light, np.int64)
+    lo, hi = objects.bounds_min[obj], objects.bounds_max[obj]
+    ext = hi - lo
+    big_r = np.sqrt(ext[:, 0] * ext[:, 0] + ext[:, 1] * ext[:, 1] + ext[:, 2] * ext[:, 2]) / 2
+    v = lights.position[light] - (lo + hi) / 2
+    vv = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+    dc2 = np.maximum(vv, big_r * big_r)
+    r = lights.radius[light]
+    q = dc2 / (r * r)
+    w = np.maximum(0.0, 1.0 - q * q)
+    e = lights.intensity[light] * w * w / (dc2 + R0 * R0)
+    ltype = lights.type[light]
+    spot = ltype == SPOT
+    if spot.any():
+        e[spot] *= sphere_spot_factor(lights, light[spot], -v[spot], big_r[spot])
+    has_dir = vv > 0.0
+    u = np.where(has_dir[:, None], v / np.where(has_dir, np.sqrt(vv), 1.0)[:, None], 0.0)
+    sun = ltype == DIRECTIONAL
+    e[sun] = lights.intensity[light[sun]]
+    u[sun] = -lights.direction[light[sun]]
+    return e, u
+
+
+def residual_vectors(group: np.ndarray, e: np.ndarray, u: np.ndarray, rho: np.ndarray, n: int
+                     ) -> np.ndarray:
+    """DESIGN section 2, "Residual": per object, (a, b_x, b_y, b_z) = the sum over its
+    competing lights of t = rho * E times (1, u_x, u_y, u_z), in float64, in the order of the
+    pairs (ascending light id when they are sorted by light row). ``group``: each pair's
+    object, as an index in 0..n-1, ascending. Returns (n, 4)."""
+    t = rho * e
+    return group_sum(group, np.column_stack([t, t * u[:, 0], t * u[:, 1], t * u[:, 2]]), n)
+
+
+def residual_at(residual: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """What the shader adds to the diffuse irradiance (DESIGN section 2, "Residual"):
+    max(0, a/4 + (b . n)/2) for each object's residual (a, b) (R, 4) at each of the sample
+    normals n (M, 3): (R, M). For one light (a, b) = E (1, u) this is E times the band-0 and
+    band-1 spherical-harmonic projection of max(0, n . u), clamped at 0."""
+    res = np.asarray(residual, np.float64)
+    nn = np.asarray(normals, np.float64)
+    return np.maximum(0.0, res[:, :1] / 4 + (res[:, 1:] @ nn.T) / 2)
+
+
+def directional_points(lights: Any, objects: Any, rows: np.ndarray, light_rows: np.ndarray,
+                       points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Lighting of the directional light rows ``light_rows`` at the sample points of object
+    rows ``rows``, each light only on objects whose mask it shares: (len(rows), M)."""
+    out = np.zeros((rows.size, points.shape[1]))
+    for lr in np.asarray(light_rows, np.int64):
+        hit = (objects.mask[rows].astype(np.int64) & int(lights.mask[lr])) != 0
+        if hit.any():
+            out[hit] += light_at_points(lights, np.full(int(hit.sum()), lr), points[rows[hit]],
+                                        normals)
+    return out
+
+
+def lighting_error(delivered: np.ndarray, all_lights: np.ndarray) -> tuple[float, float]:
+    """DESIGN section 4, lighting error, over the sample points given: (sum |D - A|, sum A),
+    D the delivered and A the all-lights lighting at each point. The error of a sequence is
+    the first summed over its frames over the second summed over its frames."""
+    d = np.asarray(delivered, np.float64)
+    a = np.asarray(all_lights, np.float64)
+    return float(np.abs(d - a).sum()), float(a.sum())
+
+
+def abrupt_pops(d_now: np.ndarray, d_before: np.ndarray, a_now: np.ndarray,
+                a_before: np.ndarray, share: float = POP_SHARE,
+                scale: np.ndarray | None = None) -> np.ndarray:
+    """DESIGN section 4, abrupt pops: True at each sample point where
+    |(D_t - D_t-1) - (A_t - A_t-1)| > ``share`` * max(A_t, A_t-1), D the delivered and A the
+    all-lights lighting, each frame's at that frame's positions (so a change of A that D
+    follows, motion included, is not a pop; a ramp of 1/15 of A a frame is not; a one-frame
+    jump of more than a tenth is). At a point unlit on both frames (A = 0) any change of D
+    is a pop: DESIGN's threshold is then 0. ``scale`` (broadcast to the points) replaces
+    max(A_t, A_t-1) as what ``share`` is taken of, for the report's diagnostic against the
+    object's mean lighting; None is DESIGN's definition."""
+    d_now, d_before = np.asarray(d_now, np.float64), np.asarray(d_before, np.float64)
+    a_now, a_before = np.asarray(a_now, np.float64), np.asarray(a_before, np.float64)
+    ref = np.maximum(a_now, a_before) if scale is None else scale
+    return np.abs((d_now - d_before) - (a_now - a_before)) > share * ref
+
+
 # =========================================================================== scenes
 
 
@@ -391,10 +575,12 @@ def changes(scene: CityScene, motion: str, i: int) -> list[tuple[str, dict[str, 
 
     ``motion`` "lights": every light moves (``move_lights``: 3 m/s round 3 m circles).
     "objects": lights stay; every object with static = False moves its box the same way
-    at PLAYER_SPEED round 5 m circles (the stadium's players and props).
+    at PLAYER_SPEED round 5 m circles (the stadium's players and props). "both": the two.
     """
     if i == 0:
         return []
+    if motion == "both":
+        return changes(scene, "lights", i) + changes(scene, "objects", i)
     if motion == "lights":
         return [("update_lights", {"id": scene.lights["id"],
                                    "position": move_lights(scene.lights, i)})]
@@ -735,8 +921,11 @@ def timing_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: i
     timed): ``repeats`` passes, each with fresh schedulers stepped in lockstep, frame by frame,
     in an order rotated every frame, so every run sees the same minutes of a shared machine;
     ``warmup`` untimed frames first. Per run: the median over passes of the pass's median
-    frame time ("ms"), and the smallest and largest pass medians."""
+    frame time ("ms"), the smallest and largest pass medians, and every timed frame in order
+    ("frames_ms": the same frame of the same pass at the same index in every run, so two
+    runs can be compared frame by frame)."""
     medians: dict[tuple, list[float]] = {key: [] for key in runs}
+    every: dict[tuple, list[float]] = {key: [] for key in runs}
     keys = list(runs)
     bar = tqdm(total=repeats * (warmup + frames), desc=desc, unit="frame", file=sys.stderr,
                leave=False)
@@ -758,8 +947,10 @@ def timing_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: i
             bar.update()
         for key in runs:
             medians[key].append(float(np.median(times[key])))
+            every[key] += times[key]
     bar.close()
-    return {key: {"ms": float(np.median(m)) * 1e3, "lo": min(m) * 1e3, "hi": max(m) * 1e3}
+    return {key: {"ms": float(np.median(m)) * 1e3, "lo": min(m) * 1e3, "hi": max(m) * 1e3,
+                  "frames_ms": np.array(every[key]) * 1e3}
             for key, m in medians.items()}
 
 
@@ -808,6 +999,247 @@ def oracle_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: i
             "differ": diff, "visible": vis_total, "visibility_mismatch": vis_mismatch,
             "examples": examples, "oracle_ms": float(np.median(oracle_ms)) if oracle_ms else 0.0,
             "oracle_configs": len(oracles), "frames": frames}
+
+
+# =========================================================================== residual study
+
+
+RESIDUAL_K = (2, 4, 8)
+FADES = ("no fade", "fade", "fade + hysteresis")
+FADE_CONFIG = {"no fade": PURE, "fade": {"hysteresis": 0.0}, "fade + hysteresis": {}}
+
+
+def residual_runs() -> list[tuple[str, bool, int, Run]]:
+    """(fade, residual, K, run): no fade (hysteresis 0), fade (hysteresis 0) and fade +
+    hysteresis (the default 0.1), each with the residual off and on, at each K of RESIDUAL_K;
+    the rest of the Config is the default."""
+    return [(fade, on, k, run(f"K {k}, {fade}, residual {'on' if on else 'off'}",
+                              max_lights=k, residual=on, **FADE_CONFIG[fade]))
+            for k in RESIDUAL_K for fade in FADES for on in (False, True)]
+
+
+@dataclass
+class FrameContext:
+    """One frame's lighting that every run shares: the measured (visible, in the subset)
+    object rows, ascending; the affecting pairs' lighting (``table``); the all-lights
+    lighting at each sample point (``a_points``); the residual terms (E, u) of each affecting
+    pair; and last frame's pairs with their terms at this frame's positions."""
+
+    rows: np.ndarray
+    normals: np.ndarray
+    table: LightingTable
+    a_points: np.ndarray  # (len(rows), M)
+    e: np.ndarray  # (P,) per affecting pair, in the table's order
+    u: np.ndarray  # (P, 3)
+    group: np.ndarray  # (P,) each pair's object as an index into rows
+    prev_group: np.ndarray  # last frame's pairs whose object is in rows: index into rows
+    prev_keep: np.ndarray  # (P_prev,) bool: which of last frame's pairs those are
+    prev_e: np.ndarray  # their terms at this frame's positions
+    prev_u: np.ndarray
+    a_prev: np.ndarray  # (N, M): last frame's a_points by object row (measured rows only)
+    directional: Any  # callable: directional light rows -> (len(rows), M)
+    best: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class ResidualAcc:
+    """One run's lighting error, abrupt pops and summed popping over a sequence (DESIGN
+    section 4), the residual in the delivered lighting when the run's Config has it on."""
+
+    residual: bool
+    k: int
+    err: float = 0.0
+    all: float = 0.0
+    object_frames: int = 0  # measured objects visible on this and the last frame
+    pop_frames: int = 0  # of those, the ones with a point that pops
+    pop_points: int = 0
+    unlit_pop_frames: int = 0  # pop_frames whose popping points all have A = 0 on both frames
+    mean_pop_frames: int = 0  # object-frames that pop against the object's mean A (diagnostic)
+    change: float = 0.0
+    total: float = 0.0
+    residual_dev: float = 0.0  # max |numpy residual - frame's| / max(|a|, 1e-30)
+    missing: int = 0
+    d_prev: np.ndarray | None = None  # (N, M) last frame's delivered lighting by object row
+    prev: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def add(self, ctx: FrameContext, f: Any) -> None:
+        """One frame of this run: ``f`` is its Scheduler.frame output."""
+        rows, table = ctx.rows, ctx.table
+        li = np.asarray(f.light_index, np.int64)
+        w = np.asarray(f.fade_weight, np.float64)
+        visible = np.asarray(f.visible)
+        slots, miss = table.selection_points(rows, li, w)
+        self.missing += miss
+        # rho of each affecting pair: 1 - the weight of its light's slot (0 if none).
+        occ = li[rows] >= 0
+        pos, found = table.find(np.repeat(rows, occ.sum(1)), li[rows][occ])
+        slot_w = np.zeros(table.obj.size)
+        slot_w[pos[found]] = w[rows][occ][found]
+        rho = 1.0 - slot_w
+        frame_res = np.asarray(f.residual, np.float64)[rows]
+        d = slots + ctx.directional(np.searchsorted(table.lights.id, f.directional_lights))
+        if self.residual:
+            d += residual_at(frame_res, ctx.normals)
+            mine = residual_vectors(ctx.group, ctx.e, ctx.u, rho, rows.size)
+            scale = np.maximum(np.abs(frame_res[:, :1]), 1e-30)
+            if rows.size:
+                self.residual_dev = max(self.residual_dev,
+                                        float((np.abs(mine - frame_res) / scale).max()))
+        err, a_sum = lighting_error(d, ctx.a_points)
+        self.err += err
+        self.all += a_sum
+        if self.d_prev is None:
+            self.d_prev = np.zeros((visible.size, d.shape[1]))
+        if self.prev is not None:
+            pv, pli, pw, prho = self.prev
+            both = pv[rows]
+            if both.any():
+                rb = rows[both]
+                before, _ = table.selection(rb, pli, pw)
+                now = slots[both].sum(1)
+                if self.residual:
+                    now = now + residual_at(mine[both], ctx.normals).sum(1)
+                    old = residual_vectors(ctx.prev_group, ctx.prev_e, ctx.prev_u,
+                                           prho[ctx.prev_keep], rows.size)
+                    before = before + residual_at(old[both], ctx.normals).sum(1)
+                if self.k not in ctx.best:
+                    ctx.best[self.k] = table.best(self.k)
+                c, _, _, t = popping(now, before, ctx.best[self.k][rb])
+                self.change += c
+                self.total += t
+                a_before = ctx.a_prev[rb]
+                pops = abrupt_pops(d[both], self.d_prev[rb], ctx.a_points[both], a_before)
+                lit = np.maximum(ctx.a_points[both], a_before) > 0.0
+                popped = pops.any(1)
+                self.object_frames += int(both.sum())
+                self.pop_frames += int(popped.sum())
+                self.pop_points += int(pops.sum())
+                self.unlit_pop_frames += int((popped & ~(pops & lit).any(1)).sum())
+                mean_a = np.maximum(ctx.a_points[both], a_before).mean(1, keepdims=True)
+                self.mean_pop_frames += int(abrupt_pops(
+                    d[both], self.d_prev[rb], ctx.a_points[both], a_before,
+                    scale=mean_a).any(1).sum())
+        self.d_prev[rows] = d
+        self.prev = (visible.copy(), li.copy(), w.copy(), rho)
+
+    def result(self) -> dict[str, float]:
+        seconds = self.object_frames * DT
+        return {"error": self.err / self.all if self.all > 0 else 0.0,
+                "pops": 1000 * self.pop_frames / seconds if seconds else 0.0,
+                "unlit_pops": 1000 * self.unlit_pop_frames / seconds if seconds else 0.0,
+                "mean_pops": 1000 * self.mean_pop_frames / seconds if seconds else 0.0,
+                "pop_points": self.pop_points, "object_frames": self.object_frames,
+                "popping": self.change / self.total if self.total > 0 else 0.0,
+                "residual_dev": self.residual_dev, "missing": self.missing}
+
+
+def residual_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: int,
+                  max_objects: int, seed: int, desc: str) -> dict[str, Any]:
+    """Steps every run's fast Scheduler in lockstep over the animated sequence and measures
+    the lighting error, abrupt pops and summed popping of each (``ResidualAcc``) on the
+    visible objects of a fixed seeded subset of at most ``max_objects`` objects."""
+    mirror = SceneAPI()
+    mirror.set_lights(**scene.lights)
+    mirror.set_objects(**scene.objects)
+    n = len(mirror.objects)
+    subset = np.zeros(n, bool)
+    if n <= max_objects:
+        subset[:] = True
+    else:
+        subset[np.random.default_rng(seed).choice(n, max_objects, replace=False)] = True
+    scheds = {key: new_scheduler(lightsched.Scheduler, r, scene) for key, r in runs.items()}
+    accs = {key: ResidualAcc(r.make_config().residual, r.make_config().max_lights)
+            for key, r in runs.items()}
+    m = 6 * SAMPLES_PER_FACE
+    a_prev = np.zeros((n, m))
+    prev_pairs: tuple[np.ndarray, np.ndarray] | None = None
+    cand_mismatch = pairs_total = measured = 0
+    sun_share = [0.0, 0.0]  # directional lighting in A, all of A
+    for i in tqdm(range(frames), desc=desc, unit="frame", file=sys.stderr, leave=False):
+        todo = changes(scene, motion, i)
+        for s in [mirror, *scheds.values()]:
+            apply_changes(s, todo)
+        lights, objects = mirror.lights, mirror.objects
+        points, normals = face_samples(objects.bounds_min, objects.bounds_max, seed=seed)
+        cams = camera_at(scene.cameras, i)
+        out = {key: s.frame(cams, dt=DT) for key, s in scheds.items()}
+        f0 = next(iter(out.values()))
+        rows = np.flatnonzero(np.asarray(f0.visible) & subset)
+        vis_l = np.searchsorted(lights.id, f0.visible_lights)
+        o, lt = affecting_pairs(lights, objects, rows, vis_l)
+        table = LightingTable(lights, points, normals, o, lt, n)
+        pairs_total += o.size
+        measured += rows.size
+        counts = np.bincount(o, minlength=n)
+        cand_mismatch += int(np.count_nonzero(counts[rows] != np.asarray(f0.candidates)[rows]))
+        e, u = residual_terms(lights, objects, o, lt)
+        cache: dict[bytes, np.ndarray] = {}
+
+        def directional(light_rows: np.ndarray, rows: np.ndarray = rows, cache: dict = cache,
+                        points: np.ndarray = points, normals: np.ndarray = normals,
+                        lights: Any = lights, objects: Any = objects) -> np.ndarray:
+            key = np.asarray(light_rows, np.int64).tobytes()
+            if key not in cache:
+                cache[key] = directional_points(lights, objects, rows, light_rows, points,
+                                                normals)
+            return cache[key]
+
+        suns = np.flatnonzero(lights.type == DIRECTIONAL)
+        a_dir = directional(suns)
+        a_points = table.all_lights_points(rows) + a_dir
+        sun_share[0] += float(a_dir.sum())
+        sun_share[1] += float(a_points.sum())
+        if prev_pairs is None:
+            prev_keep = np.zeros(0, bool)
+            po = pl = np.zeros(0, np.int64)
+        else:
+            po_all, pl_all = prev_pairs
+            prev_keep = np.isin(po_all, rows)
+            po, pl = po_all[prev_keep], pl_all[prev_keep]
+        pos, found = table.find(po, pl)
+        prev_e, prev_u = np.zeros(po.size), np.zeros((po.size, 3))
+        prev_e[found], prev_u[found] = e[pos[found]], u[pos[found]]
+        if not found.all():
+            prev_e[~found], prev_u[~found] = residual_terms(lights, objects, po[~found],
+                                                            pl[~found])
+        ctx = FrameContext(rows, normals, table, a_points, e, u, np.searchsorted(rows, o),
+                           np.searchsorted(rows, po), prev_keep, prev_e, prev_u, a_prev,
+                           directional)
+        for key, f in out.items():
+            accs[key].add(ctx, f)
+        a_prev[rows] = a_points
+        prev_pairs = (o, lt)
+    return {"runs": {key: a.result() for key, a in accs.items()},
+            "candidate_mismatch": cand_mismatch,
+            "pairs_per_object": pairs_total / max(measured, 1),
+            "measured_objects": measured / max(frames, 1), "subset": int(subset.sum()),
+            "sun_share": sun_share[0] / sun_share[1] if sun_share[1] > 0 else 0.0,
+            "frames": frames}
+
+
+def paired_cost(timing: dict[tuple, dict[str, Any]], on: Run, off: Run) -> tuple[float, float]:
+    """The residual's cost from one timing pass: the median over frames of (on - off) frame
+    time of the same frame (ms), and that over the off run's median, as a share."""
+    t_on, t_off = timing[on.key]["frames_ms"], timing[off.key]["frames_ms"]
+    diff = float(np.median(t_on - t_off))
+    return diff, diff / timing[off.key]["ms"] if timing[off.key]["ms"] > 0 else 0.0
+
+
+def big_frame_cost(n: int, n_lights: int, k: int, frames: int) -> dict[str, float]:
+    """The residual's cost on a full city frame of (n, n_lights) at K = k: the child of
+    bench/residual_cost.py (two Schedulers, residual on and off, every light moving,
+    interleaved and paired) in a process of its own, on the native numba target."""
+    import json
+    import subprocess
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent / "residual_cost.py"
+    load0 = os.getloadavg()[0]
+    done = subprocess.run([sys.executable, str(script), "--child", str(n), str(n_lights), str(k),
+                           str(frames)], capture_output=True, text=True, check=True)
+    # The share depends on the machine's load: contention stretches the whole frame more
+    # than the residual's pass, so the load goes beside the figure.
+    return {**json.loads(done.stdout.strip().splitlines()[-1]), "load": (load0, os.getloadavg()[0])}
 
 
 # =========================================================================== study
@@ -1178,7 +1610,9 @@ def popping_note(results: list[dict[str, Any]]) -> str:
     return text
 
 
-def render(results: list[dict[str, Any]], args: argparse.Namespace) -> str:
+def render(results: list[dict[str, Any]], rres: list[dict[str, Any]],
+           big: dict[str, float] | None, checks: list[dict[str, Any]],
+           args: argparse.Namespace) -> str:
     m = machine()
     cmd = "python bench/quality.py" + ("" if len(sys.argv) < 2 else " " + shlex.join(sys.argv[1:]))
     out = [BEGIN, "", "### Quality: time against error, policies, popping (`bench/quality.py`)", "",
@@ -1247,8 +1681,267 @@ def render(results: list[dict[str, Any]], args: argparse.Namespace) -> str:
     for res in results:
         out += prose(res)
     out += ["", popping_note(results), "", "Plot: `bench/plots/quality_pareto.png` (frame time "
-            "against lighting lost and against popping, Pareto fronts in red).", "", END, ""]
+            "against lighting lost and against popping, Pareto fronts in red).", ""]
+    out += residual_section(rres, big, checks) + [END, ""]
     return "\n".join(out)
+
+
+@dataclass
+class ResidualSpec:
+    label: str
+    scene: CityScene
+    note: str
+    motion: str  # see ``changes``
+    max_objects: int  # objects the metrics look at (a seeded subset beyond)
+    frames: int
+    time_frames: int
+
+
+DONE_K = 4
+DONE_ERROR = {"stadium": 0.05, "city": 0.005}  # issue 53: lighting error below these at K = 4
+DONE_COST = 0.10  # issue 53: the residual adds at most this share to a (100k, 10k) frame
+BIG = (100_000, 10_000)
+
+
+def residual_specs(specs: list[SceneSpec], args: argparse.Namespace) -> list[ResidualSpec]:
+    """city and stadium as in the rest of the study; dungeon-22 (``lightsched.scenes.
+    dungeon22``: 22 lights, K = 4 recommended) with every object measured, its lights moving
+    as the city's and its racers running as the stadium's players."""
+    from lightsched.scenes import dungeon22
+
+    out = [ResidualSpec(s.label, s.big, s.note_big, s.motion, s.max_objects, s.frames,
+                        s.time_frames) for s in specs]
+    frames = 20 if args.quick else 120
+    out.append(ResidualSpec("dungeon-22", dungeon22(seed=args.seed),
+                            f"`lightsched.scenes.dungeon22(seed={args.seed})`", "both", 10**9,
+                            frames, 4 if args.quick else 20))
+    return out
+
+
+def residual_study(spec: ResidualSpec, args: argparse.Namespace) -> dict[str, Any]:
+    say(f"\n== residual: {spec.label}: {spec.note}")
+    rows = residual_runs()
+    runs = distinct_runs([r for _, _, _, r in rows])
+    t0 = time.perf_counter()
+    with numba_threads(1):
+        met = residual_pass(spec.scene, spec.motion, runs, spec.frames, spec.max_objects,
+                            args.seed, f"{spec.label} residual metrics")
+    say(f"   metrics: {len(runs)} runs in lockstep, {spec.frames} frames, "
+        f"{met['measured_objects']:.0f} measured visible objects per frame (subset of "
+        f"{met['subset']}), {met['pairs_per_object']:.1f} affecting lights per object "
+        f"({time.perf_counter() - t0:.1f} s)")
+    if met["candidate_mismatch"]:
+        say(f"   !! {met['candidate_mismatch']} (frame, object) rows where the numpy Affects "
+            "count differs from the fast path's candidates")
+    t0 = time.perf_counter()
+    load0 = os.getloadavg()[0]
+    timing = timing_pass(spec.scene, spec.motion, runs, spec.time_frames, args.warmup,
+                         args.runs, f"{spec.label} residual timing")
+    load = (load0, os.getloadavg()[0])
+    say(f"   timing: {len(runs)} runs x {args.runs} x {spec.time_frames} frames "
+        f"({time.perf_counter() - t0:.1f} s)")
+    table = {}
+    for fade, on, k, r in rows:
+        row = {"fade": fade, "residual": on, "k": k, "ms": timing[r.key]["ms"],
+               **met["runs"][r.key]}
+        if on:
+            twin = next(r2 for f2, o2, k2, r2 in rows if (f2, o2, k2) == (fade, False, k))
+            row["cost_ms"], row["cost"] = paired_cost(timing, r, twin)
+        table[(fade, on, k)] = row
+    return {"spec": spec, "metrics": met, "rows": table, "load": load}
+
+
+def onoff(on: bool) -> str:
+    return "on" if on else "off"
+
+
+def residual_table(res: dict[str, Any]) -> list[str]:
+    head = ["K", "fade", "residual", "lighting error", "of point and spot lights",
+            "abrupt pops / 1000 obj-s",
+            "of which unlit (A = 0)", "pops against the object's mean A", "summed popping %/s",
+            "frame ms", "residual's cost"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    # Directional lights are the same in D and A, so |D - A| is the same without them; only
+    # sum A shrinks.
+    spot_point = 1.0 - res["metrics"]["sun_share"]
+    for (fade, on, k), r in res["rows"].items():
+        cost = f"{r['cost_ms']:+.2f} ms ({100 * r['cost']:+.0f}%)" if on else ""
+        out.append(f"| {k} | {fade} | {onoff(on)} | {pct(r['error'])} | "
+                   f"{pct(r['error'] / spot_point) if spot_point > 0 else '-'} | {r['pops']:.2f} | "
+                   f"{r['unlit_pops']:.2f} | {r['mean_pops']:.2f} | {per_s(r['popping'])} | "
+                   f"{r['ms']:.2f} | {cost} |")
+    return out
+
+
+def done_when(rres: list[dict[str, Any]], big: dict[str, float] | None) -> list[dict[str, Any]]:
+    """Issue 53's conditions at K = DONE_K with fade and the residual on, each judged from
+    the figures, for both fade rows ("fade", hysteresis 0; "fade + hysteresis", the
+    default). Each: condition, fade row, figures, passed (None: not measured)."""
+    by = {r["spec"].label: r["rows"] for r in rres}
+    out = []
+    k = DONE_K
+    for fade in ("fade", "fade + hysteresis"):
+        for label, limit in DONE_ERROR.items():
+            if label not in by:
+                continue
+            on, off = by[label][(fade, True, k)], by[label][(fade, False, k)]
+            out.append({"condition": f"{label} lighting error < {pct(limit, 1)}", "fade": fade,
+                        "figures": f"{pct(on['error'])} (without the residual: "
+                                   f"{pct(off['error'])})",
+                        "passed": on["error"] < limit})
+        pops = {label: rows[(fade, True, k)]["pops"] for label, rows in by.items()}
+        pops_off = {label: rows[(fade, False, k)]["pops"] for label, rows in by.items()}
+        out.append({"condition": "abrupt pops 0 per 1000 object-s in every scene", "fade": fade,
+                    "figures": ", ".join(f"{lb} {v:.2f}" for lb, v in pops.items())
+                    + " (without the residual: "
+                    + ", ".join(f"{lb} {v:.2f}" for lb, v in pops_off.items()) + ")",
+                    "passed": all(v == 0 for v in pops.values())})
+        mine = {label: (rows[(fade, True, k)]["popping"], rows[("no fade", True, k)]["popping"])
+                for label, rows in by.items()}
+        out.append({"condition": "summed popping no higher than without fade (residual on)",
+                    "fade": fade,
+                    "figures": ", ".join(f"{lb} {per_s(a)} vs {per_s(b)} %/s"
+                                         for lb, (a, b) in mine.items()),
+                    "passed": all(a <= b for a, b in mine.values())})
+    if big is None:
+        out.append({"condition": f"the residual adds at most {pct(DONE_COST, 0)} to a "
+                                 f"({BIG[0] // 1000}k, {BIG[1] // 1000}k) frame", "fade": "default",
+                    "figures": "not measured (--quick)", "passed": None})
+    else:
+        out.append({"condition": f"the residual adds at most {pct(DONE_COST, 0)} to a "
+                                 f"({BIG[0] // 1000}k, {BIG[1] // 1000}k) frame",
+                    "fade": "fade + hysteresis",
+                    "figures": f"off {big['off']:.2f} ms, on {big['on']:.2f} ms, paired "
+                               f"{big['diff']:+.2f} ms ({100 * big['diff'] / big['off']:+.0f}%)",
+                    "passed": big["diff"] / big["off"] <= DONE_COST})
+    return out
+
+
+def verdict(passed: bool | None) -> str:
+    return {True: "pass", False: "**fail**", None: "not measured"}[passed]
+
+
+def done_table(checks: list[dict[str, Any]]) -> list[str]:
+    out = [f"| condition (K = {DONE_K}, residual on) | fade row | figures | verdict |",
+           "|---|---|---|---|"]
+    out += [f"| {c['condition']} | {c['fade']} | {c['figures']} | {verdict(c['passed'])} |"
+            for c in checks]
+    return out
+
+
+def done_answer(checks: list[dict[str, Any]]) -> str:
+    failed = [c for c in checks if c["passed"] is False]
+    unknown = [c for c in checks if c["passed"] is None]
+    head = ("every condition holds" if not failed and not unknown else
+            f"{len(checks) - len(failed) - len(unknown)} of {len(checks)} checks pass")
+    text = f"**Answer (issue 53 done-when, K = {DONE_K}, fade, residual on):** {head}"
+    if failed:
+        text += "; failing: " + "; ".join(f"{c['condition']} with {c['fade']}: {c['figures']}"
+                                          for c in failed)
+    if unknown:
+        text += "; not measured: " + "; ".join(c["condition"] for c in unknown)
+    return text + "."
+
+
+def residual_plot(rres: list[dict[str, Any]], path: Any) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    m = machine()
+    fig, axes = plt.subplots(1, len(rres), figsize=(5.2 * len(rres), 4.6), squeeze=False)
+    style = {"no fade": (":", "o"), "fade": ("--", "s"), "fade + hysteresis": ("-", "^")}
+    for ax, res in zip(axes[0], rres, strict=True):
+        for fade in FADES:
+            for on in (False, True):
+                pts = [res["rows"][(fade, on, k)] for k in RESIDUAL_K]
+                ls, mk = style[fade]
+                ax.plot([p["ms"] for p in pts], [100 * p["error"] for p in pts], ls=ls, marker=mk,
+                        c="tab:orange" if on else "tab:blue",
+                        label=f"{fade}, residual {onoff(on)}")
+                if fade == "fade + hysteresis":
+                    for p in pts:
+                        ax.annotate(f"K={p['k']}", (p["ms"], 100 * p["error"]), fontsize=7,
+                                    xytext=(3, 3), textcoords="offset points")
+        ax.set_yscale("symlog", linthresh=0.01)
+        ax.set_xlabel("Scheduler.frame median (ms)")
+        ax.set_ylabel("lighting error sum|D - A| / sum A (%)")
+        ax.set_title(res["spec"].label, fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle(f"Lighting error against frame time, K = "
+                 f"{', '.join(map(str, RESIDUAL_K))}, with and without the residual "
+                 f"({m['cpu']}, {m['nproc']} CPUs)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def residual_section(rres: list[dict[str, Any]], big: dict[str, float] | None,
+                     checks: list[dict[str, Any]]) -> list[str]:
+    out = ["#### Residual, lighting error and abrupt pops (issue 53)", "",
+           "Method (DESIGN section 4). Every run is a fast-path Scheduler with the default "
+           "Config but for K, fade and residual: **no fade** = fade_in = fade_out = 0 and "
+           "hysteresis 0; **fade** = 0.25 s fades, hysteresis 0; **fade + hysteresis** = the "
+           "default (0.25 s, 0.1). Same sequences as above (dungeon-22: its lights move as the "
+           "city's and its racers run as the stadium's players). At the "
+           f"{6 * SAMPLES_PER_FACE} sample points of each measured visible object (as above: "
+           f"{SAMPLES_PER_FACE} seeded points per box face, face normals, the same points "
+           "every frame, moving with the box): **A** = every light that affects the object "
+           "(numpy Affects, the unshadowed rule ignored) plus every directional light whose "
+           "mask it shares, at full weight; **D** = the slots' lights times their fade "
+           "weights, plus the frame's residual evaluated at the point's normal, max(0, a/4 + "
+           "(b . n)/2), when the run has it on, plus the frame's directional_lights (outside "
+           "the slots). Each light's term is the Lambert term of the windowed falloff at the "
+           "point (`light_at_points`). **lighting error** = sum |D - A| / sum A over every "
+           "measured (frame, object, point); \"of point and spot lights\": the same with the "
+           "directional lights left out of A (they are the same in D, so only sum A changes; "
+           "a diagnostic, not DESIGN's metric). **abrupt pops**: an object-frame (visible on "
+           "this and the last frame) pops when at any of its points |(D_t - D_t-1) - (A_t - "
+           f"A_t-1)| > {POP_SHARE:g} max(A_t, A_t-1); counted per 1000 such object-seconds at "
+           "dt = 1/60 s; \"of which unlit\": the object-frames whose popping points all have "
+           "A = 0 on both frames, where DESIGN's threshold is 0 and any change of D pops; "
+           "\"against the object's mean A\" (a diagnostic, not DESIGN's metric): the same "
+           f"test with {POP_SHARE:g} x the mean over the object's points of max(A_t, A_t-1) "
+           "as the threshold, so that dim points do not pop on small changes. "
+           "**summed popping** = the popping above (this frame's slots and weights against "
+           "last frame's, both at this frame's positions, per object summed over its points, "
+           "over the delivered total), with, when the residual is on, the residual of each "
+           "frame's weights added to both sides (rebuilt in numpy from DESIGN section 2 and "
+           "checked against the frame's residual: largest relative difference below). "
+           "**frame ms**: `Scheduler.frame` medians as above, every row of a scene in one "
+           "lockstep timing pass; **residual's cost**: the median over those frames of "
+           "(residual on - residual off) of the same frame, over the off row's median.", ""]
+    for res in rres:
+        spec, met = res["spec"], res["metrics"]
+        dev = max((r["residual_dev"] for r in met["runs"].values()), default=0.0)
+        missing = sum(r["missing"] for r in met["runs"].values())
+        out += [f"##### {spec.label}", "",
+                f"{spec.note}, {met['frames']} frames ({spec.time_frames} timed per run); "
+                f"{met['measured_objects']:.0f} measured visible objects per frame "
+                + (f"(a seeded subset of {met['subset']} objects)"
+                   if met["subset"] < spec.scene.n_objects else "(all)")
+                + f", {met['pairs_per_object']:.1f} affecting lights per object; directional "
+                f"lights give {pct(met['sun_share'], 1)} of A. Numpy Affects vs fast-path "
+                f"candidates: {met['candidate_mismatch']} differing (frame, object) rows; slot "
+                f"lights outside the affecting set: {missing}; numpy residual vs the frame's: "
+                f"largest difference {dev:.1e} of |a| (DESIGN's tolerance 1e-5). 1-minute load "
+                f"average while timing: {res['load'][0]:.2f} .. {res['load'][1]:.2f}.", ""]
+        out += residual_table(res) + [""]
+    if big is not None:
+        out += [f"The residual on a ({BIG[0] // 1000}k, {BIG[1] // 1000}k) city frame at K = "
+                f"{DONE_K} (`bench/residual_cost.py`'s child: every light moving, on and off "
+                f"interleaved in one process, native target): off {big['off']:.2f} ms, on "
+                f"{big['on']:.2f} ms, paired difference {big['diff']:+.2f} ms "
+                f"({100 * big['diff'] / big['off']:+.0f}%); 1-minute load average "
+                f"{big['load'][0]:.2f} .. {big['load'][1]:.2f} on {os.cpu_count()} CPUs.", ""]
+    out += ["Done when (issue 53), judged from the figures above:", ""] + done_table(checks)
+    out += ["", done_answer(checks), "",
+            "Plot: `bench/plots/quality_residual.png` (lighting error against frame time "
+            "across K, with and without the residual, one panel per scene).", "",
+            "![lighting error against frame time](plots/quality_residual.png)", ""]
+    return out
 
 
 def scene_specs(args: argparse.Namespace) -> list[SceneSpec]:
@@ -1278,31 +1971,57 @@ def scene_specs(args: argparse.Namespace) -> list[SceneSpec]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="smaller scenes, fewer frames (< 30 s)")
+    ap.add_argument("--quick", action="store_true", help="smaller scenes, fewer frames")
     ap.add_argument("--write", action="store_true",
                     help="write the section into bench/RESULTS.md and the plot into bench/plots")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--residual-only", action="store_true",
+                    help="only the residual study (issue 53); cannot --write")
     args = ap.parse_args(argv)
+    if args.residual_only and args.write:
+        ap.error("--write needs the whole study (RESULTS.md holds one section)")
     if args.quick:
         args.warmup, args.runs = 1, 1
     else:
         args.warmup, args.runs = 3, 3
     t_start = time.perf_counter()
+    specs = scene_specs(args)
     results = []
-    for spec in scene_specs(args):
+    for spec in [] if args.residual_only else specs:
         res = study(spec, args)
         print_tables(res)
         results.append(res)
+    rres = []
+    for rspec in residual_specs(specs, args):
+        res = residual_study(rspec, args)
+        say(f"\n   {rspec.label}: lighting error, abrupt pops, summed popping")
+        for line in residual_table(res):
+            say("   " + line)
+        rres.append(res)
+    big = None
+    if not args.quick:
+        t0 = time.perf_counter()
+        big = big_frame_cost(*BIG, DONE_K, 20)
+        say(f"\n== residual on a ({BIG[0]}, {BIG[1]}) city frame, K = {DONE_K}: off "
+            f"{big['off']:.2f} ms, on {big['on']:.2f} ms, paired {big['diff']:+.2f} ms "
+            f"({time.perf_counter() - t0:.1f} s)")
+    checks = done_when(rres, big)
     say("\n== answers")
     for res in results:
         for line in prose(res):
             say(line)
+    say("")
+    for line in done_table(checks):
+        say(line)
+    say(done_answer(checks))
     if args.write:
         PLOTS.mkdir(parents=True, exist_ok=True)
         path = PLOTS / "quality_pareto.png"
         plot(results, path)
-        say(f"\nwrote {path}")
-        write_results(render(results, args), BEGIN, END)
+        path_r = PLOTS / "quality_residual.png"
+        residual_plot(rres, path_r)
+        say(f"\nwrote {path} and {path_r}")
+        write_results(render(results, rres, big, checks, args), BEGIN, END)
     say(f"\ntotal {time.perf_counter() - t_start:.1f} s")
     return 0
 

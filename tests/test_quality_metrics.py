@@ -13,6 +13,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 import quality as q  # noqa: E402
 
 import lightsched.reference as ref  # noqa: E402
+from lightsched import Config  # noqa: E402
 from lightsched.scene import DIRECTIONAL, POINT, SPOT, SceneAPI  # noqa: E402
 from lightsched.scenes import city  # noqa: E402
 
@@ -194,3 +195,180 @@ def test_affecting_pairs_match_the_oracle_candidates() -> None:
 
 def test_pareto() -> None:
     assert q.pareto([(1, 5), (2, 3), (3, 4), (1, 5)]) == [True, True, False, True]
+
+
+# --------------------------------------------------------------------------- issue 53 metrics
+
+
+def sphere_directions(n: int = 40_000) -> np.ndarray:
+    """n nearly uniform unit vectors (a Fibonacci sphere): each stands for 4 pi / n sr."""
+    i = np.arange(n) + 0.5
+    y = 1 - 2 * i / n
+    r = np.sqrt(1 - y * y)
+    phi = math.pi * (3 - math.sqrt(5)) * i
+    return np.column_stack([r * np.cos(phi), y, r * np.sin(phi)])
+
+
+def band1_projection(f: np.ndarray, dirs: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The band-0 and band-1 real spherical-harmonic projection of samples ``f`` over
+    ``dirs``, evaluated at the unit vectors ``at``."""
+    w = 4 * math.pi / dirs.shape[0]
+    y0, y1 = 0.5 / math.sqrt(math.pi), math.sqrt(3 / (4 * math.pi))
+    c0 = (f * y0).sum() * w
+    c1 = (f[:, None] * y1 * dirs).sum(0) * w
+    return c0 * y0 + y1 * (at @ c1)
+
+
+def one_light_one_object() -> tuple[SceneAPI, np.ndarray, np.ndarray]:
+    """A small box 10 m below a point light: E and u of the residual, for rho = 1."""
+    s = SceneAPI()
+    s.set_lights(id=[3], position=[[0.0, 10.0, 0.0]], radius=[30.0], intensity=[50.0])
+    s.set_objects(id=[0], bounds_min=[[-0.1, -0.1, -0.1]], bounds_max=[[0.1, 0.1, 0.1]])
+    e, u = q.residual_terms(s.lights, s.objects, np.array([0]), np.array([0]))
+    return s, e, u
+
+
+def test_residual_terms_of_a_point_light() -> None:
+    _, e, u = one_light_one_object()
+    w = 1 - (100 / 900) ** 2
+    assert e[0] == pytest.approx(50 * w * w / (100 + q.R0 ** 2))
+    assert np.allclose(u[0], UP)
+
+
+def test_one_lights_residual_is_its_lambert_term_up_to_band_1() -> None:
+    s, e, u = one_light_one_object()
+    res = q.residual_vectors(np.array([0]), e, u, np.array([1.0]), 1)
+    assert np.allclose(res[0], e[0] * np.r_[1.0, u[0]])
+    normals = np.vstack([UP, sphere_directions(64)])
+    got = q.residual_at(res, normals)[0]
+    # the light's Lambert term at each direction n, as a function on the sphere
+    dirs = sphere_directions()
+    lambert = e[0] * np.maximum(0.0, dirs @ u[0])
+    want = np.maximum(0.0, band1_projection(lambert, dirs, normals))
+    assert np.allclose(got, want, rtol=1e-3, atol=1e-3 * e[0])
+    # facing the light: 1/4 + 1/2 of the Lambert term E (band 1 stops there), and the
+    # face's Lambert term from light_at_points at the box's top is E within the box's size
+    assert got[0] == pytest.approx(0.75 * e[0])
+    top = lit(s, [0], [0.0, 0.1, 0.0], UP)[0]
+    assert top == pytest.approx(e[0], rel=0.05)
+
+
+def test_residual_matches_the_oracle() -> None:
+    from lightsched.scenes import stadium
+
+    for sc in (city(300, 40, seed=5), stadium(60, seed=1, n_lights=120)):
+        frame = ref.schedule(sc.lights, sc.objects, sc.cameras, Config(max_lights=2))
+        s = SceneAPI()
+        s.set_lights(**sc.lights)
+        s.set_objects(**sc.objects)
+        rows = np.flatnonzero(frame.visible)
+        vis_l = np.searchsorted(s.lights.id, frame.visible_lights)
+        o, lt = q.affecting_pairs(s.lights, s.objects, rows, vis_l)
+        e, u = q.residual_terms(s.lights, s.objects, o, lt)
+        # a cut frame: every selected light on at weight 1, the others wholly in the residual
+        slot = np.zeros(o.size, bool)
+        for j, (oo, ll) in enumerate(zip(o, lt, strict=True)):
+            slot[j] = ll in frame.light_index[oo]
+        mine = q.residual_vectors(np.searchsorted(rows, o), e, u, 1.0 - slot, rows.size)
+        theirs = np.asarray(frame.residual, np.float64)[rows]
+        scale = np.maximum(np.abs(theirs[:, :1]), 1e-30)
+        assert np.all(np.abs(mine - theirs) / scale <= 1e-5)
+        assert (theirs[:, 0] > 0).sum() > 5  # some objects have lights past K
+
+
+def test_lighting_error() -> None:
+    a = np.array([[1.0, 2.0], [0.0, 3.0]])
+    assert q.lighting_error(a, a) == (0.0, 6.0)
+    d = np.array([[0.5, 2.0], [1.0, 3.0]])
+    err, total = q.lighting_error(d, a)
+    assert (err, total) == (1.5, 6.0)  # |D - A| counts light missing and light in excess
+
+
+def test_abrupt_pops_jump_and_ramp() -> None:
+    a = np.ones(16)
+    jump = np.r_[1.0, 0.5, np.full(14, 0.5)]
+    pops = [bool(q.abrupt_pops(jump[t], jump[t - 1], a[t], a[t - 1])) for t in range(1, 16)]
+    assert pops == [True] + [False] * 14  # one frame jumps by half: one pop
+    ramp = 1.0 - np.arange(16) / 15  # the same light faded out over 15 frames
+    assert not any(q.abrupt_pops(ramp[t], ramp[t - 1], a[t], a[t - 1]) for t in range(1, 16))
+    # D following A (motion, or a light that changes while it is delivered) is not a pop
+    moving = np.linspace(1.0, 5.0, 16)
+    assert not any(q.abrupt_pops(moving[t], moving[t - 1], moving[t], moving[t - 1])
+                   for t in range(1, 16))
+    # ... but A changing while D stays is: the definition is symmetric
+    assert q.abrupt_pops(1.0, 1.0, 2.0, 1.0)
+
+
+def test_abrupt_pop_at_an_unlit_point_is_any_change() -> None:
+    """DESIGN's threshold, 0.1 * max(A_t, A_t-1), is 0 where no light reaches the point: a
+    change of D of any size there is a pop (the residual's band-1 term lights faces that no
+    light faces, and it changes as lights and objects move)."""
+    assert q.abrupt_pops(1e-9, 0.0, 0.0, 0.0)
+    assert not q.abrupt_pops(0.0, 0.0, 0.0, 0.0)
+    assert not q.abrupt_pops(1e-9, 0.0, 0.0, 0.0, scale=np.array(1.0))
+
+
+def two_frames(residual: bool) -> q.ResidualAcc:
+    """tiny_table's object with lights 0 and 2 in its slots, then light 2 dropped to the
+    residual in one frame (fade off): the accumulator's popping after the second frame."""
+    from types import SimpleNamespace
+
+    s, table, _ = tiny_table()
+    rows = np.array([0])
+    pts, normals = q.face_samples(s.objects.bounds_min, s.objects.bounds_max)
+    e, u = q.residual_terms(s.lights, s.objects, table.obj, table.light)
+    group = np.zeros(table.obj.size, np.int64)
+    ctx = q.FrameContext(rows, normals, table, table.all_lights_points(rows), e, u, group,
+                         group, np.ones(group.size, bool), e, u,
+                         np.zeros((1, normals.shape[0])), lambda lr: np.zeros((1, normals.shape[0])))
+    acc = q.ResidualAcc(residual=residual, k=2)
+    for li, w in (([[0, 2]], [[1.0, 1.0]]), ([[0, -1]], [[1.0, 0.0]])):
+        li, w = np.array(li), np.array(w)
+        rho = 1.0 - np.isin(table.light, li[0][w[0] > 0])
+        res = q.residual_vectors(group, e, u, rho, 1).astype(np.float32)
+        acc.add(ctx, SimpleNamespace(light_index=li, fade_weight=w, visible=np.array([True]),
+                                     residual=res, directional_lights=np.zeros(0, np.int32)))
+        ctx.a_prev[rows] = ctx.a_points
+    return acc
+
+
+def test_popping_with_the_residual_counts_its_change() -> None:
+    s, table, ep = tiny_table()
+    off, on = two_frames(False), two_frames(True)
+    assert off.change == pytest.approx(ep[2])  # light 2's whole lighting vanishes
+    # with the residual: both sides carry the residual of their own weights (lights 1 and 3
+    # in it on both frames, light 2 joining it), at the same positions
+    _, normals = q.face_samples(s.objects.bounds_min, s.objects.bounds_max)
+    e, u = q.residual_terms(s.lights, s.objects, table.obj, table.light)
+    group = np.zeros(e.size, np.int64)
+
+    def res_sum(rho: list[float]) -> float:
+        return float(q.residual_at(q.residual_vectors(group, e, u, np.array(rho), 1),
+                                   normals).sum())
+
+    before = ep[0] + ep[2] + res_sum([0.0, 1.0, 0.0, 1.0])
+    now = ep[0] + res_sum([0.0, 1.0, 1.0, 1.0])
+    assert on.change == pytest.approx(abs(now - before))
+    # with the residual, light 2 moves into the residual's band-1 term: the change is what
+    # that term misses or adds, more than 0 and less than the light
+    assert 0.0 < on.change < off.change
+    assert off.object_frames == on.object_frames == 1
+    assert off.pop_frames == 1  # losing the brightest light at once is an abrupt pop
+
+
+def test_every_light_in_a_slot_delivers_all_lights() -> None:
+    """With K above every object's count and no fade, D is A at every point (the sun
+    outside the slots on both sides, nothing in the residual): no error, no pop, no popping;
+    with K = 1 the slots miss light and the residual gives some of it back."""
+    sc = city(150, 30, seed=2)
+    runs = {r.key: r for r in (q.run("all", max_lights=32, **q.PURE),
+                               q.run("one", max_lights=1, residual=False, **q.PURE),
+                               q.run("one+", max_lights=1, **q.PURE))}
+    out = q.residual_pass(sc, "lights", runs, 4, 10**9, 0, "test")
+    assert out["candidate_mismatch"] == 0 and out["sun_share"] > 0
+    r = {runs[key].name: m for key, m in out["runs"].items()}
+    assert r["all"]["object_frames"] > 0 and r["all"]["residual_dev"] == 0.0
+    assert r["all"]["error"] == pytest.approx(0.0, abs=1e-12)
+    assert r["all"]["pops"] == 0.0 and r["all"]["popping"] == pytest.approx(0.0, abs=1e-12)
+    assert r["one"]["error"] > 0.001  # small: the sun is most of the city's light
+    assert r["one+"]["error"] < r["one"]["error"] and r["one+"]["residual_dev"] <= 1e-5
