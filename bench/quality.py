@@ -1055,6 +1055,7 @@ class ResidualAcc:
     pop_points: int = 0
     unlit_pop_frames: int = 0  # pop_frames whose popping points all have A = 0 on both frames
     mean_pop_frames: int = 0  # object-frames that pop against the object's mean A (diagnostic)
+    steady_pop_frames: int = 0  # pop_frames where D held still at every popping point: A jumped
     change: float = 0.0
     total: float = 0.0
     residual_dev: float = 0.0  # max |numpy residual - frame's| / max(|a|, 1e-30)
@@ -1115,6 +1116,9 @@ class ResidualAcc:
                 self.pop_frames += int(popped.sum())
                 self.pop_points += int(pops.sum())
                 self.unlit_pop_frames += int((popped & ~(pops & lit).any(1)).sum())
+                d_jump = np.abs(d[both] - self.d_prev[rb]) > POP_SHARE * np.maximum(
+                    ctx.a_points[both], a_before)
+                self.steady_pop_frames += int((popped & ~(pops & d_jump).any(1)).sum())
                 mean_a = np.maximum(ctx.a_points[both], a_before).mean(1, keepdims=True)
                 self.mean_pop_frames += int(abrupt_pops(
                     d[both], self.d_prev[rb], ctx.a_points[both], a_before,
@@ -1127,6 +1131,7 @@ class ResidualAcc:
         return {"error": self.err / self.all if self.all > 0 else 0.0,
                 "pops": 1000 * self.pop_frames / seconds if seconds else 0.0,
                 "unlit_pops": 1000 * self.unlit_pop_frames / seconds if seconds else 0.0,
+                "steady_pops": 1000 * self.steady_pop_frames / seconds if seconds else 0.0,
                 "mean_pops": 1000 * self.mean_pop_frames / seconds if seconds else 0.0,
                 "pop_points": self.pop_points, "object_frames": self.object_frames,
                 "popping": self.change / self.total if self.total > 0 else 0.0,
@@ -1758,7 +1763,8 @@ def onoff(on: bool) -> str:
 def residual_table(res: dict[str, Any]) -> list[str]:
     head = ["K", "fade", "residual", "lighting error", "of point and spot lights",
             "abrupt pops / 1000 obj-s",
-            "of which unlit (A = 0)", "pops against the object's mean A", "summed popping %/s",
+            "of which unlit (A = 0)", "of which D steady", "pops against the object's mean A",
+            "summed popping %/s",
             "frame ms", "residual's cost"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     # Directional lights are the same in D and A, so |D - A| is the same without them; only
@@ -1768,7 +1774,8 @@ def residual_table(res: dict[str, Any]) -> list[str]:
         cost = f"{r['cost_ms']:+.2f} ms ({100 * r['cost']:+.0f}%)" if on else ""
         out.append(f"| {k} | {fade} | {onoff(on)} | {pct(r['error'])} | "
                    f"{pct(r['error'] / spot_point) if spot_point > 0 else '-'} | {r['pops']:.2f} | "
-                   f"{r['unlit_pops']:.2f} | {r['mean_pops']:.2f} | {per_s(r['popping'])} | "
+                   f"{r['unlit_pops']:.2f} | {r['steady_pops']:.2f} | {r['mean_pops']:.2f} | "
+                   f"{per_s(r['popping'])} | "
                    f"{r['ms']:.2f} | {cost} |")
     return out
 
@@ -1902,6 +1909,9 @@ def residual_section(rres: list[dict[str, Any]], big: dict[str, float] | None,
            f"A_t-1)| > {POP_SHARE:g} max(A_t, A_t-1); counted per 1000 such object-seconds at "
            "dt = 1/60 s; \"of which unlit\": the object-frames whose popping points all have "
            "A = 0 on both frames, where DESIGN's threshold is 0 and any change of D pops; "
+           f"\"of which D steady\": those where D moved by at most {POP_SHARE:g} max(A_t, "
+           "A_t-1) at every popping point, so the pop is A's jump (a light entering or leaving "
+           "the visible lights, say), not a change the viewer sees; "
            "\"against the object's mean A\" (a diagnostic, not DESIGN's metric): the same "
            f"test with {POP_SHARE:g} x the mean over the object's points of max(A_t, A_t-1) "
            "as the threshold, so that dim points do not pop on small changes. "

@@ -308,6 +308,19 @@ def test_abrupt_pop_at_an_unlit_point_is_any_change() -> None:
     assert not q.abrupt_pops(1e-9, 0.0, 0.0, 0.0, scale=np.array(1.0))
 
 
+def test_abrupt_pop_where_only_all_lights_jump() -> None:
+    """DESIGN's test is of D's change against A's, so a jump of A that D ramps after is a
+    pop too: a light entering the visible lights adds its whole share to A at once while
+    its slot fades in by 1/15 a frame (0.25 s at 60 Hz). The viewer sees D move 6.7% of
+    that light, no jump; bench/quality.py counts these ("of which D steady") and finds
+    most of the city's and dungeon-22's pops are of this kind."""
+    light = 1.0
+    a_before, a_now = 1.0, 1.0 + light
+    d_before, d_now = 1.0, 1.0 + light / 15
+    assert q.abrupt_pops(d_now, d_before, a_now, a_before)
+    assert abs(d_now - d_before) <= q.POP_SHARE * max(a_now, a_before)  # D held still
+
+
 def two_frames(residual: bool) -> q.ResidualAcc:
     """tiny_table's object with lights 0 and 2 in its slots, then light 2 dropped to the
     residual in one frame (fade off): the accumulator's popping after the second frame."""
