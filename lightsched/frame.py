@@ -32,8 +32,8 @@ if sorted(_OBJECT_PASS_ORDER) != sorted(PER_OBJECT_NAMES):
     raise RuntimeError("frame._OBJECT_PASS_ORDER must name fields.py's per-object arrays")
 
 # Per-object arrays: dtype, shape ("N", "NK" or "N4") and the value of an empty slot
-# (DESIGN section 3), in the order objects.object_pass writes them (residual last: the
-# residual pass's, after it).
+# (DESIGN section 3), in the order objects.object_pass writes them (residual last: its
+# Residual argument's, after the row's slots).
 PER_OBJECT: dict[str, tuple[Any, str, Any]] = {
     name: (FIELDS_BY_NAME[name].dtype, FIELDS_BY_NAME[name].kind, FIELDS_BY_NAME[name].empty)
     for name in _OBJECT_PASS_ORDER}

@@ -54,7 +54,8 @@ if TYPE_CHECKING:
     from .shadows import ShadowSet
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
-SORT_FEW = 16                # residual_row sorts more lights than this with numpy's argsort
+SORT_FEW = 16                # residual_gather sorts more lights than this with numpy's sort
+RESIDUAL_TERMS = 4096        # a ResidualBatch's terms (more when one object has more pairs)
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
@@ -119,7 +120,8 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
-    Residual (residual_row, once a row's slots are written); k_static = a
+    Residual (residual_gather once a row's slots are written, residual_flush by batches);
+    k_static = a
     tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows; visible, reset:
     bool [N]; live_id: int32 [L].
 
@@ -181,8 +183,8 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
         pool_size = max(pool_size, seg[run[r], 1])
     cf = np.empty((CF_ROWS, pool_size))
     ci = np.empty((CI_ROWS, pool_size), np.int64)
-    res_rows = np.empty(pool_size, np.int64)
-    res_rho = np.empty(pool_size)
+    batch = residual_batch(pool_size)
+    in_batch = 0
     for r in range(first, end):
         o = run[r]
         cand = -1
@@ -274,8 +276,16 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
             if any_shadow and cnt:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
             summed = visible[o] and (cand > cnt or fading)
-        residual_row(o, (heap_j, seg[o, 0], seg[o, 0] + seg[o, 1]), residual.on and summed,
-                     k, (o_index, s_w), residual, (res_rows, res_rho))
+        if residual.on and summed:
+            if batch.start[in_batch] + seg[o, 1] > batch.keys.shape[0]:
+                in_batch = residual_flush(batch, in_batch, residual)
+            in_batch = residual_gather(o, (heap_j, seg[o, 0], seg[o, 0] + seg[o, 1]), k,
+                                       (o_index, s_w), residual, batch, in_batch)
+            if in_batch == OBJECT_CHUNK:
+                in_batch = residual_flush(batch, in_batch, residual)
+        else:
+            residual.residual[o, :] = 0.0
+    residual_flush(batch, in_batch, residual)
 
 
 class Residual(NamedTuple):
@@ -292,76 +302,103 @@ class Residual(NamedTuple):
     residual: np.ndarray     # float32 [N, 4]: the output
 
 
+class ResidualBatch(NamedTuple):
+    """A chunk's residual work in flight: the objects whose lights are gathered and not yet
+    summed (residual_gather, residual_flush). Summing them together, in a loop of their
+    own, keeps the terms' divisions and cache misses in flight across objects, where in
+    each object's turn they waited on one another and on the selection's branches."""
+
+    objects: np.ndarray  # int64 [OBJECT_CHUNK]: the objects' rows, in turn
+    start: np.ndarray    # int64 [OBJECT_CHUNK + 1]: each one's first term in keys, then the end
+    keys: np.ndarray     # int64 [capacity]: per term (light row << 32) | its index in rho
+    rho: np.ndarray      # float64 [capacity]: per term 1 - w_l, by the object's first term
+
+
+@nb.njit(cache=True, nogil=True)
+def residual_batch(pool_size):
+    """An empty ResidualBatch that holds at least one object of ``pool_size`` pairs."""
+    cap = max(pool_size, RESIDUAL_TERMS)
+    return ResidualBatch(np.empty(OBJECT_CHUNK, np.int64), np.zeros(OBJECT_CHUNK + 1, np.int64),
+                         np.empty(cap, np.int64), np.empty(cap))
+
+
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def residual_row(o, pairs, summed, k, slots, res, scratch):
-    """residual[o] once the object pass has written o's slots: over o's cached pairs whose
-    light counts (res_id >= 0: live, and with unshadowed = "skip" not a light with
-    shadows), in ascending light row (= ascending id), t = (1 - w_l) * E_l with w_l the
-    float64 weight of l's slot (0 without one) and (E_l, u_l) priority.residual_term's;
-    a += t, b += t u; stored float32. o: the object row; pairs = (the pair heap's light
-    rows, int32 [H]; o's first pair; its end); summed: whether any competing light is not
-    wholly in a slot (a competing light without a slot, or a slot fading), else the row
-    is 0, as it is for an invisible object; k: K; slots = (this frame's light_index, int32
-    [N, K]; the slots' float64 weights [N, K]); res: Residual; scratch = (rows int64,
-    rho float64), each of at least o's pairs. DESIGN section 2, "Residual"; section 3
-    (residual [N, 4])."""
+def residual_gather(o, pairs, k, slots, res, batch, n):
+    """Adds object row o to the batch (its n-th object): over o's cached pairs whose light
+    counts (res_id >= 0: live, and with unshadowed = "skip" not a light with shadows), those
+    not wholly in a slot, with rho = 1 - w_l, w_l the float64 weight of l's slot (0
+    without one), in ascending light row (= ascending id). o: the object row; pairs =
+    (the pair heap's light rows, int32 [H]; o's first pair; its end); k: K; slots =
+    (this frame's light_index, int32 [N, K]; the slots' float64 weights [N, K]); res:
+    Residual; batch: ResidualBatch with room for o's pairs. Returns n + 1. DESIGN
+    section 2, "Residual"."""
+    res_id = res.res_id
     heap_j, first, end = pairs
     slot_rows, slot_w = slots
-    rows, rho = scratch
-    a = 0.0
-    b0 = 0.0
-    b1 = 0.0
-    b2 = 0.0
-    if summed:
-        res_id = res.res_id
-        m = 0
-        for t in range(first, end):
-            j = np.int64(heap_j[t])
-            # The slot's weight by a sum over the K slots: light rows are unique, and it
-            # vectorises where a search would branch a pair.
-            w = 0.0
-            for s in range(k):
-                w += slot_w[o, s] if slot_rows[o, s] == j else 0.0
-            rows[m] = j
-            rho[m] = 1.0 - w
-            # Only the lights not wholly in a slot: t = 0 would add nothing.
-            m += (res_id[j] >= 0) & (w < 1.0)
-        if m > SORT_FEW:
-            order = np.argsort(rows[:m])
-            rows[:m] = rows[:m][order]
-            rho[:m] = rho[:m][order]
-        else:
-            for i in range(1, m):
-                j = rows[i]
-                x = rho[i]
-                at = i
-                while at > 0 and rows[at - 1] > j:
-                    rows[at] = rows[at - 1]
-                    rho[at] = rho[at - 1]
-                    at -= 1
-                rows[at] = j
-                rho[at] = x
-        if m:
-            lo, hi, origin = res.bounds_min, res.bounds_max, res.origin
-            ex = hi[o, 0] - lo[o, 0]
-            ey = hi[o, 1] - lo[o, 1]
-            ez = hi[o, 2] - lo[o, 2]
-            e2 = ex * ex + ey * ey + ez * ez
-            geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
-                   (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
-                   (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
-            for i in range(m):
-                e, u0, u1, u2 = residual_term(res.hot, res.lf, rows[i], geo)
-                t = rho[i] * e
-                a += t
-                b0 += t * u0
-                b1 += t * u1
-                b2 += t * u2
-    out = res.residual
-    out[o, 0] = np.float32(a)
-    out[o, 1] = np.float32(b0)
-    out[o, 2] = np.float32(b1)
-    out[o, 3] = np.float32(b2)
+    keys, rho = batch.keys, batch.rho
+    base = batch.start[n]
+    m = 0
+    for t in range(first, end):
+        j = np.int64(heap_j[t])
+        # The slot's weight by a pass over the K slots without a branch (light rows are
+        # unique).
+        w = 0.0
+        for s in range(k):
+            ws = slot_w[o, s]
+            w = ws if slot_rows[o, s] == j else w
+        # Sorted by this key, the lights are in ascending row, and each keeps its rho.
+        keys[base + m] = (j << 32) | m
+        rho[base + m] = 1.0 - w
+        # Only the lights not wholly in a slot: t = 0 would add nothing.
+        m += (res_id[j] >= 0) & (w < 1.0)
+    if m > SORT_FEW:
+        keys[base:base + m].sort()
+    else:
+        for i in range(base + 1, base + m):
+            x = keys[i]
+            at = i
+            while at > base and keys[at - 1] > x:
+                keys[at] = keys[at - 1]
+                at -= 1
+            keys[at] = x
+    batch.objects[n] = o
+    batch.start[n + 1] = base + m
+    return n + 1
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def residual_flush(batch, n, res):
+    """residual[o] of the batch's n objects: t = rho_l * E_l over each one's terms in
+    turn, (E_l, u_l) priority.residual_term's; a += t, b += t u in float64, stored
+    float32. batch: ResidualBatch; res: Residual. Returns 0 (the batch is empty). DESIGN
+    section 2, "Residual"; section 3 (residual [N, 4])."""
+    lo, hi, origin, out = res.bounds_min, res.bounds_max, res.origin, res.residual
+    keys, rho, start = batch.keys, batch.rho, batch.start
+    for b in range(n):
+        o = batch.objects[b]
+        ex = hi[o, 0] - lo[o, 0]
+        ey = hi[o, 1] - lo[o, 1]
+        ez = hi[o, 2] - lo[o, 2]
+        e2 = ex * ex + ey * ey + ez * ez
+        geo = ((lo[o, 0] + hi[o, 0]) / 2 - origin[0],
+               (lo[o, 1] + hi[o, 1]) / 2 - origin[1],
+               (lo[o, 2] + hi[o, 2]) / 2 - origin[2], math.sqrt(e2) / 2, e2)
+        a = 0.0
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        for i in range(start[b], start[b + 1]):
+            e, u0, u1, u2 = residual_term(res.hot, res.lf, keys[i] >> 32, geo)
+            t = rho[start[b] + (keys[i] & 0xFFFFFFFF)] * e
+            a += t
+            b0 += t * u0
+            b1 += t * u1
+            b2 += t * u2
+        out[o, 0] = np.float32(a)
+        out[o, 1] = np.float32(b0)
+        out[o, 2] = np.float32(b1)
+        out[o, 3] = np.float32(b2)
+    return 0
 
 
 def residual_ids(live_id: np.ndarray, shadows: np.ndarray, skip: bool,

@@ -362,22 +362,24 @@ def residual_term(hot, lf, j, geo):
     the cone), u = v/|v| ((0, 0, 0) when v . v is 0); directional: E = i, u = -direction.
     hot, lf: PackedLights' rows; j: the light's row; geo as record_geometry gives it, in
     the packed rows' frame. DESIGN section 2, "Residual" (its per-light term; the
-    residual pass of objects.py sums them)."""
+    object pass's residual_flush sums them)."""
     typ = (np.int64(hot[j, 5]) >> 3) & 3
     if typ == DIRECTIONAL:
         return hot[j, 6], -lf[j, 0], -lf[j, 1], -lf[j, 2]
-    # Without a branch a light (but the spot's cone): whether the centre is in range is
-    # no better predicted than a coin, and w = 0 makes E = 0 by itself.
     v0 = hot[j, 0] - geo[0]
     v1 = hot[j, 1] - geo[1]
     v2 = hot[j, 2] - geo[2]
     vv = v0 * v0 + v1 * v1 + v2 * v2
     dc2 = max(vv, geo[3] * geo[3])
-    r = hot[j, 3]
-    q = dc2 / (r * r)
+    r2 = hot[j, 3] * hot[j, 3]
+    if dc2 >= r2:
+        # The centre out of range (q >= 1, so w = 0 and E = 0): most of a city's lights
+        # that reach a box past its slots, and the divisions are the term's cost.
+        return 0.0, 0.0, 0.0, 0.0
+    q = dc2 / r2
     w = max(0.0, 1.0 - q * q)
     e = hot[j, 6] * w * w / (dc2 + R0 * R0)
-    if typ == SPOT and w > 0.0:
+    if typ == SPOT:
         e = e * spot_cone(hot, lf, j, geo, True)[1]
     # vv = 0 (also when v is so short that its square underflows): no direction.
     inv = 1.0 / math.sqrt(vv) if vv > 0.0 else 0.0
