@@ -121,7 +121,7 @@ class Scheduler(SceneAPI):
         changes = clock.lap("changes", find_changes(
             None if last is None else last.changes, lights, objects))
         plan = plan_frame(last, changes, cams, cut, self.frame_index, cfg, tuning,
-                          quiet=not objects.named)
+                          quiet=_quiet(last, objects))
         if plan.kind == UNCHANGED:
             return self._repeat(last, plan, clock, prior)
         began = self._began(prior)
@@ -254,6 +254,18 @@ class Scheduler(SceneAPI):
             "seconds": clock.seconds(),
         }
         return frame
+
+
+def _quiet(last: FrameState | None, objects: Any) -> bool:
+    """No update_objects call since last frame named one of its casters: a re-sent caster
+    dirties its shadow views even with its values unchanged (DESIGN "Dirty"); other
+    objects re-sent unchanged leave the frame unchanged. (Last frame's casters are what a
+    clean view holds; a view still dirty keeps the frame from being unchanged anyway.)"""
+    if not objects.named:
+        return True
+    if last is None:
+        return False
+    return not np.isin(np.concatenate(objects.named), last.casters.ids).any()
 
 
 class _Clock:
