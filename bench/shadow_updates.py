@@ -12,6 +12,7 @@ frame (shadows, casters, views). Budgets 0, 8 and 32, caster_culling "camera" an
 
     python bench/shadow_updates.py                 # the table, markdown
     python bench/shadow_updates.py --frames 20 --objects 20000
+    python bench/shadow_updates.py --cost          # the stages' share at (100k, 10k), S = 16
 """
 
 from __future__ import annotations
@@ -112,6 +113,41 @@ def run(scene: CityScene, movers: float, lights_move: bool, budget: int, culling
             "views_ms": float(np.median(views_ms))}
 
 
+def cost(frames: int, moving: bool) -> None:
+    """The shadow stages' share of a frame at (100k, 10k), S = 16: the city with 5% of its
+    point and spot lights and its sun shadowed, every light circling (full frames), or
+    still with 0.1% of the objects moving (incremental frames)."""
+    sc = city(100_000, 10_000, seed=1, spot_fraction=0.3, shadow_fraction=0.05,
+              sun_shadows=True)
+    for culling in ("camera", "light"):
+        s = ls.Scheduler(ls.Config(shadow_budget=16, caster_culling=culling))
+        s.set_lights(**sc.lights)
+        s.set_objects(**sc.objects)
+        rng = np.random.default_rng(0)
+        lo = np.array(sc.objects["bounds_min"], np.float64)
+        hi = np.array(sc.objects["bounds_max"], np.float64)
+        ids = sc.objects["id"]
+        rows_ms: dict[str, list[float]] = {"shadows": [], "casters": [], "views": [],
+                                           "total": []}
+        for t in range(frames + 3):
+            if moving:
+                s.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, t + 1))
+            else:
+                rows = rng.choice(ids.size, 100, replace=False)
+                lo[rows] += 0.05
+                hi[rows] += 0.05
+                s.update_objects(id=ids[rows], bounds_min=lo[rows], bounds_max=hi[rows])
+            f = s.frame(sc.cameras)
+            if t >= 3:
+                for k in rows_ms:
+                    rows_ms[k].append(f.stats["seconds"].get(k, 0.0) * 1e3)
+        med = {k: float(np.median(v)) for k, v in rows_ms.items()}
+        stages = med["shadows"] + med["casters"] + med["views"]
+        print(f"| {'lights moving' if moving else '0.1% objects moving'} | {culling} | "
+              f"{med['total']:.1f} | {med['shadows']:.2f} | {med['casters']:.2f} | "
+              f"{med['views']:.2f} | {100 * stages / med['total']:.0f}% |", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=30)
@@ -119,8 +155,17 @@ def main() -> int:
                     help="frames before measuring (the first draws every view)")
     ap.add_argument("--objects", type=int, default=20_000)
     ap.add_argument("--scenes", default="city,stadium,static")
+    ap.add_argument("--cost", action="store_true", help="the stages' share at (100k, 10k)")
     args = ap.parse_args()
     m = machine()
+    if args.cost:
+        print(f"{m['cpu']}: (100k, 10k), S = 16, medians of {args.frames} frames\n")
+        print("| frames | culling | frame ms | shadows ms | casters ms | views ms | "
+              "shadow stages' share |")
+        print("|---|---|---|---|---|---|---|")
+        for moving in (True, False):
+            cost(args.frames, moving)
+        return 0
     print(f"{m['cpu']}, {args.frames} frames after {args.warmup}, {args.objects} city "
           "objects, S = 16, default atlas 8192\n")
     print("| scene | culling | camera | B | point/spot views drawn / frame | every frame | "

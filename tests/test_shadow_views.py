@@ -15,6 +15,9 @@ import lightsched as ls
 import lightsched.reference as ref
 
 DIRECTIONAL = 2
+# The replay and the rules hold for the oracle and, through the equivalence tests, for
+# the fast path; these tests run on both.
+SCHEDULERS = pytest.mark.parametrize("cls", [ref.Scheduler, ls.Scheduler], ids=["oracle", "fast"])
 
 
 def cam(position=(0.0, 0.0, 0.0), forward=(0.0, 0.0, 1.0), cid=None, far=200.0):
@@ -162,10 +165,11 @@ class Renderer:
         return f, truth
 
 
+@SCHEDULERS
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("culling", ["camera", "light"])
-def test_replay_no_budget_nothing_stale(seed, culling):
-    s = ref.Scheduler(ls.Config(caster_culling=culling, shadow_budget=6))
+def test_replay_no_budget_nothing_stale(seed, culling, cls):
+    s = cls(ls.Config(caster_culling=culling, shadow_budget=6))
     scene = Scene(seed)
     scene.install(s)
     r = Renderer(s)
@@ -176,14 +180,14 @@ def test_replay_no_budget_nothing_stale(seed, culling):
         r.name(scene.step(s))
 
 
+@SCHEDULERS
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("budget", [1, 3, 8])
-def test_replay_budget_draws_every_dirty_view_in_time(seed, budget):
+def test_replay_budget_draws_every_dirty_view_in_time(seed, budget, cls):
     """While the scene moves, nothing clean is stale and at most B point/spot views are
     drawn per frame; once it stops, the D dirty views left are all drawn within ceil(D/B)
     frames (the budget rule: B per frame, none added)."""
-    s = ref.Scheduler(ls.Config(shadow_budget=6, shadow_update_budget=budget,
-                                caster_culling="light"))
+    s = cls(ls.Config(shadow_budget=6, shadow_update_budget=budget, caster_culling="light"))
     scene = Scene(seed)
     scene.install(s)
     r = Renderer(s)
@@ -204,8 +208,9 @@ def test_replay_budget_draws_every_dirty_view_in_time(seed, budget):
     assert not f.shadow_dirty.any(), "a still scene with everything drawn reports dirty views"
 
 
-def test_nothing_moved_no_dirty_view():
-    s = ref.Scheduler(ls.Config(shadow_budget=6))
+@SCHEDULERS
+def test_nothing_moved_no_dirty_view(cls):
+    s = cls(ls.Config(shadow_budget=6))
     scene = Scene(11)
     scene.install(s)
     f = s.frame(scene.cameras())
@@ -215,10 +220,11 @@ def test_nothing_moved_no_dirty_view():
     assert f.stats["counts"]["texels_rendered"] == 0
 
 
-def test_budget_order_not_ready_first_then_age_times_importance():
+@SCHEDULERS
+def test_budget_order_not_ready_first_then_age_times_importance(cls):
     """Two point lights, budget 6: the first frame draws the first light's six faces (not
     ready, shadow_lights order); the second the other's."""
-    s = ref.Scheduler(ls.Config(shadow_update_budget=6))
+    s = cls(ls.Config(shadow_update_budget=6))
     s.set_lights(id=[1, 2], position=[[0, 0, 10], [3, 0, 10]], radius=[4, 4],
                  intensity=[1, 2], shadows=[True, True])
     s.set_objects(id=[0], bounds_min=[[-5, -5, 8]], bounds_max=[[5, 5, 9]])
@@ -232,8 +238,9 @@ def test_budget_order_not_ready_first_then_age_times_importance():
     assert sorted(f.shadow_lights[f.slot_shadow[0][f.slot_shadow[0] >= 0]].tolist()) == [1, 2]
 
 
-def test_skip_light_with_unready_view_affects_nothing():
-    s = ref.Scheduler(ls.Config(shadow_update_budget=1, unshadowed="skip"))
+@SCHEDULERS
+def test_skip_light_with_unready_view_affects_nothing(cls):
+    s = cls(ls.Config(shadow_update_budget=1, unshadowed="skip"))
     s.set_lights(id=[1], position=[[0, 0, 10]], radius=[4], shadows=[True])
     s.set_objects(id=[0], bounds_min=[[-1, -1, 8]], bounds_max=[[1, 1, 9]])
     for frame in range(5):
@@ -244,8 +251,9 @@ def test_skip_light_with_unready_view_affects_nothing():
     assert f.count.tolist() == [1] and f.slot_shadow[0, 0] == 0
 
 
-def test_static_dirty_only_for_static_causes():
-    s = ref.Scheduler(ls.Config())
+@SCHEDULERS
+def test_static_dirty_only_for_static_causes(cls):
+    s = cls(ls.Config())
     s.set_lights(id=[1], type=[1], position=[[0, 0, 0]], direction=[[0, 0, 1]], radius=[30],
                  shadows=[True])
     s.set_objects(id=[0, 1], bounds_min=[[-1, -1, 8], [2, 2, 9]],
@@ -265,9 +273,10 @@ def test_static_dirty_only_for_static_causes():
     assert f.shadow_dirty.tolist() == [0]
 
 
-def test_light_culling_camera_moving_alone_dirties_no_local_view():
+@SCHEDULERS
+def test_light_culling_camera_moving_alone_dirties_no_local_view(cls):
     for seed in range(3):
-        s = ref.Scheduler(ls.Config(caster_culling="light", shadow_budget=6))
+        s = cls(ls.Config(caster_culling="light", shadow_budget=6))
         scene = Scene(seed)
         scene.install(s)
         last = s.frame(scene.cameras())
@@ -303,10 +312,11 @@ def _check_atlas(f: ls.Frame, atlas: int, types: dict[int, int]) -> None:
                 f"tiles {tiles[a]} and {tiles[b]} overlap"
 
 
+@SCHEDULERS
 @pytest.mark.parametrize("seed", range(3))
-def test_atlas_tiles_disjoint_inside_and_sticky(seed):
+def test_atlas_tiles_disjoint_inside_and_sticky(seed, cls):
     atlas = 4096
-    s = ref.Scheduler(ls.Config(shadow_atlas_size=atlas, shadow_budget=12))
+    s = cls(ls.Config(shadow_atlas_size=atlas, shadow_budget=12))
     rng = np.random.default_rng(seed)
     n = 14
     types = rng.choice([0, 0, 1], n)
@@ -336,8 +346,9 @@ def test_atlas_tiles_disjoint_inside_and_sticky(seed):
         position = position + rng.normal(0, 1.5, 3)
 
 
-def test_atlas_fit_lowers_tiers_from_the_back_and_drops_past_the_prefix():
-    s = ref.Scheduler(ls.Config(shadow_budget=8))
+@SCHEDULERS
+def test_atlas_fit_lowers_tiers_from_the_back_and_drops_past_the_prefix(cls):
+    s = cls(ls.Config(shadow_budget=8))
     # Camera inside every light: s_max = 1080 / tan(0.5) = 1977 px, tier 2048.
     s.set_lights(id=[1, 2, 3, 4], position=[[0, 0, 0.5 + i] for i in range(4)],
                  radius=[10] * 4, intensity=[4, 3, 2, 1], shadows=[True] * 4)
@@ -349,7 +360,7 @@ def test_atlas_fit_lowers_tiers_from_the_back_and_drops_past_the_prefix():
     assert f.shadow_tier.tolist() == [2048, 2048, 1024, 256]
     _check_atlas(f, 8192, {1: 0, 2: 0, 3: 0, 4: 0})
     # No atlas: the tiers as the ranking made them.
-    f = ref.Scheduler(ls.Config(shadow_budget=8, shadow_atlas_size=0))
+    f = cls(ls.Config(shadow_budget=8, shadow_atlas_size=0))
     f.set_lights(**{k: getattr(s.lights, k) for k in ("id", "position", "radius",
                                                        "intensity", "shadows")})
     f.set_objects(id=[0], bounds_min=[[-1, -1, 2]], bounds_max=[[1, 1, 3]])
@@ -357,7 +368,7 @@ def test_atlas_fit_lowers_tiers_from_the_back_and_drops_past_the_prefix():
     assert g.shadow_tier.tolist() == [2048] * 4 and (g.shadow_rect == -1).all()
     # 4096^2 holds 42 point lights at 256: the 43rd and after leave shadow_lights.
     n = 50
-    s = ref.Scheduler(ls.Config(shadow_budget=60, shadow_atlas_size=4096))
+    s = cls(ls.Config(shadow_budget=60, shadow_atlas_size=4096))
     s.set_lights(id=np.arange(n), position=[[0, 0, 5]] * n, radius=[1] * n,
                  intensity=np.linspace(2, 1, n), shadows=[True] * n)
     s.set_objects(id=[0], bounds_min=[[-1, -1, 4]], bounds_max=[[1, 1, 6]])
@@ -366,8 +377,9 @@ def test_atlas_fit_lowers_tiers_from_the_back_and_drops_past_the_prefix():
     assert sum(6 * int(t) ** 2 for t in f.shadow_tier) <= 4096 ** 2
 
 
-def test_directional_views_follow_camera_ids():
-    s = ref.Scheduler(ls.Config(cascades=2))
+@SCHEDULERS
+def test_directional_views_follow_camera_ids(cls):
+    s = cls(ls.Config(cascades=2))
     s.set_lights(id=[1], type=[2], direction=[[0, -1, 0]], shadows=[True])
     s.set_objects(id=[0], bounds_min=[[-1, -1, 8]], bounds_max=[[1, 1, 9]])
     a, b = cam((0, 0, 0), cid=7), cam((5, 0, 0), cid=3)
