@@ -237,13 +237,20 @@ def _volumes(rows, light_type, position, direction, cams, splits, overlap):
 
 
 def culling_volumes(lights: LightStore, rows: np.ndarray, frames: CameraFrames,
-                    splits: np.ndarray, overlap: float) -> Volumes:
+                    splits: np.ndarray, overlap: float, light_culling: bool = False) -> Volumes:
     """The culling volumes of the shadowed lights ``rows`` (DESIGN section 2, "Casters"):
     for a point or spot light one hull of its position and each camera's frustum (volume
     k = camera k); for a directional light each camera's cascade slices [a_c, z_c+1] swept
-    towards the light (volume k*C + c, its caster_masks bit)."""
-    return Volumes(*_volumes(rows, lights.type, lights.position, lights.direction,
-                             frames.arrays(), splits, overlap))
+    towards the light (volume k*C + c, its caster_masks bit). With ``light_culling``
+    (caster_culling = "light", DESIGN "Shadow views") a point or spot light has a single
+    volume of no planes, which every box is in: no camera test."""
+    vn, vq, vm, shared = _volumes(rows, lights.type, lights.position, lights.direction,
+                                  frames.arrays(), splits, overlap)
+    if light_culling:
+        local = lights.type[rows] != DIRECTIONAL
+        vm[local] = -1
+        vm[local, 0] = 0
+    return Volumes(vn, vq, vm, shared)
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -693,11 +700,13 @@ class Casters:
 def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights: LightStore,
                  objects: ObjectStore, shadows: ShadowSet, packed: Packed, grid: Grid,
                  cameras: Cameras, visible: np.ndarray, cascade_overlap: float,
-                 tuning: Tuning) -> Casters:
+                 tuning: Tuning, light_culling: bool = False) -> Casters:
     """The casters stage. Casters depend on the light, the cameras and every object: with
     plan.keep_casters, a light none of them changed for keeps its list; when only objects
     changed (plan.patch_casters), a directional light's list changes only at those
-    objects' rows, which alone it sweeps. ``visible``: the objects' visibility."""
+    objects' rows, which alone it sweeps. ``visible``: the objects' visibility;
+    ``light_culling``: caster_culling = "light" (point and spot casters get no camera
+    test)."""
     shadow_rows = shadows.rows
     recompute = np.ones(shadow_rows.size, np.bool_)
     patch = None
@@ -717,7 +726,7 @@ def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights
                 rows = np.flatnonzero(mark)
             patch = (rows, again)
     finder = _Finder(lights, objects, packed.rows, grid, (plan.origin, plan.fast), visible,
-                     tuning)
+                     tuning, light_culling)
     return finder.casters(cameras.frames, cameras.splits, shadow_rows, recompute,
                           None if last is None else last.by_light, patch, cascade_overlap)
 
@@ -734,6 +743,7 @@ class _Finder:
     frame: tuple[np.ndarray, bool]
     visible: np.ndarray
     tuning: Tuning
+    light_culling: bool = False
 
     def casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                 recompute: np.ndarray, cached: dict[int, tuple[np.ndarray, np.ndarray]] | None,
@@ -765,7 +775,8 @@ class _Finder:
             if len(todo) < n_s else []
         if todo:
             rows_t = shadow_rows[todo]
-            vols = culling_volumes(lights, rows_t, frames, splits, overlap)
+            vols = culling_volumes(lights, rows_t, frames, splits, overlap,
+                                   self.light_culling)
             is_dir = [t == DIRECTIONAL for t in lights.type[rows_t].tolist()]
             sun = [i for i, d in enumerate(is_dir) if d]
             patched = [] if patch is None else [i for i in sun if not patch[1][todo[i]]]

@@ -142,7 +142,6 @@ def explain_record(rec: ExplainRecord, object_id: Any) -> Explanation:
                 competing[int(lights.id[j])] = float(rec.heap.p[t])
     box = np.concatenate([rec.objects.bounds_min[row], rec.objects.bounds_max[row]])[None, :]
     h, h_abs = cfg.hysteresis, cfg.hysteresis_abs
-    shadow_ids = {int(x) for x in frame.shadow_lights}
 
     rows: dict[int, ExplainRow] = {}
     wanted = set(lights.id[rec.light_visible].tolist()) | set(slots) | held
@@ -162,7 +161,9 @@ def explain_record(rec: ExplainRecord, object_id: Any) -> Explanation:
             reason = "light_not_visible"
         elif not int(lights.mask[j]) & int(rec.objects.mask[row]):
             reason = "masked"
-        elif cfg.unshadowed == "skip" and lights.shadows[j] and lid not in shadow_ids:
+        elif cfg.unshadowed == "skip" and lights.shadows[j] and not rec.live[j]:
+            # (Visible here: not live means skipped, without a map or with a view of it
+            # not ready, DESIGN "Sampling".)
             reason = "unshadowed_skip"
         elif directional and not cfg.directional_in_slots:
             reason = "directional"

@@ -97,6 +97,22 @@ FIELDS: tuple[FrameField, ...] = (
     _per_object("residual", np.float32, ("N", "4"), 0.0,
                 "L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in "
                 "the slots; the shader adds max(0, a/4 + (b . n)/2)"),
+    _per_frame("shadow_views", np.uint32, ("S",),
+               "per shadow light its views, as caster_masks' bits (point: the six faces; "
+               "spot: bit 0; directional: bit camera * C + cascade)"),
+    _per_frame("shadow_dirty", np.uint32, ("S",),
+               "the views whose casters, light, camera, tier or tile changed since they were "
+               "last rendered (or never were)"),
+    _per_frame("shadow_static_dirty", np.uint32, ("S",),
+               "the dirty views whose cached static-caster layer must be redrawn too"),
+    _per_frame("shadow_update", np.uint32, ("S",),
+               "the dirty views to render this frame (shadow_update_budget)"),
+    _per_frame("shadow_rect", np.int32, ("S", "6", "3"),
+               "per shadow light and view bit its atlas tile (x, y, size); -1 where there "
+               "is none (directional lights, unused rows, no atlas)"),
+    _per_frame("camera_ids", np.int32, ("cameras",),
+               "the cameras' ids in list order (directional view bits and cascade_splits "
+               "rows follow it)"),
 )
 
 FIELDS_BY_NAME: dict[str, FrameField] = {f.name: f for f in FIELDS}

@@ -65,6 +65,12 @@ class Frame:
     caster_ids: np.ndarray
     caster_masks: np.ndarray
     residual: np.ndarray
+    shadow_views: np.ndarray
+    shadow_dirty: np.ndarray
+    shadow_static_dirty: np.ndarray
+    shadow_update: np.ndarray
+    shadow_rect: np.ndarray
+    camera_ids: np.ndarray
     stats: dict[str, Any] = field(default_factory=dict)
 
     def arrays(self) -> dict[str, np.ndarray]:

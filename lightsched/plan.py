@@ -99,15 +99,19 @@ class FramePlan:
             "pairs": how["grid"] + how["pairs"],
             "shadows": how["shadows"],
             "casters": how["casters"],
+            "views": how["views"],
             "lists": how["lists"] + how["objects"],
             "fade": "fused with selection in the object pass",
         }
 
 
 def plan_frame(last: FrameState | None, changes: Changes, cameras: Cameras, cut: bool,
-               frame_index: int, config: Config, tuning: Tuning) -> FramePlan:
+               frame_index: int, config: Config, tuning: Tuning, quiet: bool = True
+               ) -> FramePlan:
     """The plan of a frame, from last frame's stage outputs (``last``: None after the
-    first frame or a frame that stopped half way) and this frame's changes and cameras."""
+    first frame or a frame that stopped half way) and this frame's changes and cameras.
+    ``quiet``: no update_objects call named an object since last frame (even unchanged,
+    a named caster dirties its shadow views)."""
     n_l, n = changes.lights["id"].size, changes.objects["id"].size
     thesis, fast = config.model == "thesis", config.precision == "fast"
     moved = cameras.moved
@@ -117,9 +121,11 @@ def plan_frame(last: FrameState | None, changes: Changes, cameras: Cameras, cut:
         assert last is not None and lrows is not None and orows is not None
         assert changes.cast_rows is not None
         if (lrows.size == 0 and orows.size == 0 and changes.cast_rows.size == 0 and not moved
-                and not cut and last.shadows.settled and not last.outputs.fading.any()):
-            return FramePlan(UNCHANGED, "nothing moved and no slot is fading; the last "
-                             "frame's outputs are shared", cameras_moved=False)
+                and not cut and last.shadows.settled and not last.outputs.fading.any()
+                and quiet and last.views.quiet):
+            return FramePlan(UNCHANGED, "nothing moved, no slot is fading and no shadow view "
+                             "was dirty; the last frame's outputs are shared",
+                             cameras_moved=False)
         why = _why_incremental(last, changes, moved, cut)
         kind = INCREMENTAL
     else:

@@ -36,6 +36,21 @@ Decisions taken where DESIGN is silent (the fast path makes the same ones):
   models: E does not depend on P.
 - Thesis eccentricity uses the focal ray g = f + (focus_x t_x) r + (focus_y t_y) u and
   theta = atan2(|g x v|, g . v); P is the max over all cameras.
+- Shadow views (DESIGN "Shadow views, updates and the atlas"): values are compared as
+  stored (float equality, so -0.0 == 0.0); a directional view's camera as given (position,
+  forward, up unnormalised). A directional view of a camera absent this frame keeps its
+  memory while its light stays shadowed (split screens come and go). An update_objects
+  call names a view's caster when the id is among the casters it held when rendered or
+  holds now; the view remembers it until it is rendered, as static when the object is
+  static now or was when rendered. A view is not ready from the frame its (tier, tile)
+  differs from last frame's until it is rendered, even if it comes back to the tile it was
+  last drawn in (another view may have been drawn there since).
+- Atlas: the tile allocator is ``allocate_tiles``: a view keeps its tile while its tier
+  holds; new and re-tiered views go largest first (then shadow_lights order, bit) to the
+  first free aligned square in Morton order; if fragmentation leaves one without room,
+  everything is packed again from an empty atlas the same way. stats counts
+  ``tiles_moved`` (views of last frame and this one whose rect differs, re-tiered ones
+  included) and ``texels_rendered`` (tier^2 over shadow_update's views, cascades at 4096).
 """
 
 from __future__ import annotations
@@ -177,7 +192,7 @@ class _Light:
 
 
 class _Object:
-    __slots__ = ("row", "id", "lo", "hi", "mask", "centre", "R", "e2", "casts")
+    __slots__ = ("row", "id", "lo", "hi", "mask", "centre", "R", "e2", "casts", "static")
 
 
 def _read_lights(store: Any) -> list[_Light]:
@@ -210,6 +225,7 @@ def _read_objects(store: Any) -> list[_Object]:
         hi = ob.hi = _vec(store.bounds_max[row])
         ob.mask = int(store.mask[row])
         ob.casts = bool(store.casts_shadows[row])
+        ob.static = bool(store.static[row])
         ob.centre = ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2)
         ex, ey, ez = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
         ob.e2 = ex * ex + ey * ey + ez * ez
@@ -444,10 +460,11 @@ def cube_face_bits(p: Vec, r: float, lo: Vec, hi: Vec) -> int:
     return bits
 
 
-def caster_mask(lt: _Light, ob: _Object, volumes: list[list[Plane]]) -> int:
+def caster_mask(lt: _Light, ob: _Object, volumes: list[list[Plane]] | None) -> int:
     """caster_masks entry of object ``ob`` for shadowed light ``lt`` (0: not a caster).
     ``volumes`` are the light's culling volumes: one hull per camera (point/spot) or one
-    sweep per camera and cascade, bit camera*C + cascade (directional)."""
+    sweep per camera and cascade, bit camera*C + cascade (directional); None for a point
+    or spot light under caster_culling = "light" (no camera test)."""
     if not (ob.casts and lt.mask & ob.mask):
         return 0
     if lt.type == DIRECTIONAL:
@@ -458,13 +475,19 @@ def caster_mask(lt: _Light, ob: _Object, volumes: list[list[Plane]]) -> int:
         return bits
     if affects_geometry(lt, ob) is None:
         return 0
-    if not any(aabb_in_planes(planes, ob.lo, ob.hi) for planes in volumes):
+    if volumes is not None and not any(aabb_in_planes(planes, ob.lo, ob.hi)
+                                       for planes in volumes):
         return 0
     return 1 if lt.type == SPOT else cube_face_bits(lt.position, lt.radius, ob.lo, ob.hi)
 
 
-def culling_volumes(lt: _Light, cams: list[CameraFrame], cfg: Config) -> list[list[Plane]]:
+def culling_volumes(lt: _Light, cams: list[CameraFrame], cfg: Config
+                    ) -> list[list[Plane]] | None:
+    """The light's culling volumes (DESIGN section 2, "Casters"); None for a point or spot
+    light under caster_culling = "light" ("Shadow views": no camera test)."""
     if lt.type != DIRECTIONAL:
+        if cfg.caster_culling == "light":
+            return None
         return [hull_planes(cam, lt.position) for cam in cams]
     v = (-lt.direction[0], -lt.direction[1], -lt.direction[2])
     volumes = []
@@ -495,13 +518,19 @@ class Scheduler(SceneAPI):
         super().__init__(config)
         self._state: dict[int, _ObjectState] = {}
         self._shadowed: dict[int, int] = {}  # light id -> tier, last frame's shadow lights
+        # Shadow views by key (light id, bit) for point and spot lights, (light id,
+        # "camera", camera id, cascade) for directional ones; last frame's atlas tiles by
+        # point/spot key.
+        self._views: dict[tuple[Any, ...], _View] = {}
+        self._tiles: dict[tuple[int, int], tuple[int, int, int]] = {}
         self._explained: dict[str, Any] | None = None  # what explain reads of the last frame
 
     def _memory(self) -> Any:
-        return copy.deepcopy((self._state, self._shadowed)), self._explained
+        return copy.deepcopy((self._state, self._shadowed, self._views, self._tiles)), \
+            self._explained
 
     def _put_back(self, memory: Any) -> None:
-        (self._state, self._shadowed), self._explained = memory
+        (self._state, self._shadowed, self._views, self._tiles), self._explained = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         t0 = time.perf_counter()
@@ -520,15 +549,20 @@ class Scheduler(SceneAPI):
                  for ob in objects}
 
         light_visible, object_visible = _visibility(lights, objects, cams)
-        shadow_ids, tiers = self._shadow_lights(lights, objects, cams, light_visible,
-                                                object_visible)
-        shadow_index = {lid: k for k, lid in enumerate(shadow_ids)}
-        # With "skip", a shadowed light that did not get a shadow map affects nothing.
+        shadow_ids, tiers, importance = self._shadow_lights(lights, objects, cams,
+                                                            light_visible, object_visible)
+        frame = empty_frame(self.objects.id, cfg.max_lights, cfg.cascades)
+        casters = _write_casters(frame, lights, objects, shadow_ids, cams, cfg)
+        ready, view_counts = self._shadow_views(frame, lights, objects, shadow_ids, tiers,
+                                                importance, casters, cameras)
+        # slot_shadow samples only maps whose every view is ready ("Sampling").
+        shadow_index = {lid: k for k, lid in enumerate(shadow_ids) if ready[k]}
+        # With "skip", a shadowed light that did not get a shadow map, or whose map has a
+        # view not ready, affects nothing.
         skipped = [cfg.unshadowed == "skip" and lt.shadows and lt.id not in shadow_index
                    for lt in lights]
         competing = [lt for lt in lights if light_visible[lt.row] and not skipped[lt.row]]
 
-        frame = empty_frame(self.objects.id, cfg.max_lights, cfg.cascades)
         row_of = {lt.id: lt.row for lt in lights}
         by_id = {lt.id: lt for lt in lights}
         pairs = 0
@@ -564,7 +598,7 @@ class Scheduler(SceneAPI):
             [] if cfg.directional_in_slots else _by_priority(directional), dtype=np.int32)
         frame.shadow_lights = np.array(shadow_ids, dtype=np.int32)
         frame.shadow_tier = np.array(tiers, dtype=np.uint16)
-        _write_casters(frame, lights, objects, shadow_ids, cams, cfg)
+        frame.camera_ids = np.array([camera_id(k, c) for k, c in enumerate(cameras)], np.int32)
         frame.visible_lights = np.array([lt.id for lt in lights if light_visible[lt.row]],
                                         dtype=np.int32)
         frame.cascade_splits = np.array([cascade_splits(cam, cfg) for cam in cams],
@@ -580,6 +614,7 @@ class Scheduler(SceneAPI):
                 "visible_objects": int(sum(object_visible)),
                 "visible_lights": int(sum(light_visible)),
                 "pairs": pairs,
+                **view_counts,
             },
             "seconds": {"total": time.perf_counter() - t0},
         }
@@ -643,16 +678,21 @@ class Scheduler(SceneAPI):
 
     def _shadow_lights(self, lights: list[_Light], objects: list[_Object],
                        cams: list[CameraFrame], light_visible: list[bool],
-                       object_visible: list[bool]) -> tuple[list[int], list[int]]:
+                       object_visible: list[bool]
+                       ) -> tuple[list[int], list[int], dict[int, float]]:
         """Shadowed lights (DESIGN section 2, "Shadowed lights"): visible, shadows = true,
         affecting a visible object (Affects without the unshadowed rule); ranked by
         importance with hysteresis, directional lights first; their ids and tiers, which
-        the next frame's hysteresis remembers."""
+        the next frame's hysteresis remembers, then fitted to the atlas ("Atlas": lights
+        past the longest prefix that fits at 256 leave, then tiers drop from the back; the
+        hysteresis remembers the tiers before). Also each candidate's importance without
+        the hysteresis bonus (the update budget's order)."""
         cfg = self.config
         h = cfg.hysteresis
         keys_dir: dict[int, float] = {}
         keys_other: dict[int, float] = {}
         s_max_of: dict[int, float] = {}
+        importance: dict[int, float] = {}
         for lt in lights:
             if not (lt.shadows and light_visible[lt.row]):
                 continue
@@ -664,6 +704,7 @@ class Scheduler(SceneAPI):
                 imp = lt.intensity + lt.p_user
             else:
                 imp, s_max_of[lt.id] = shadow_importance(lt, cams, cfg.c1)
+            importance[lt.id] = imp
             if lt.id in self._shadowed:
                 imp = imp + h * abs(imp) + cfg.hysteresis_abs
             (keys_dir if lt.type == DIRECTIONAL else keys_other)[lt.id] = imp
@@ -679,8 +720,251 @@ class Scheduler(SceneAPI):
             if prev is not None and prev / (2 * (1 + h)) <= s_max <= prev * (1 + h):
                 tier = prev
             tiers.append(tier)
+        if cfg.shadow_atlas_size:
+            types = {lt.id: lt.type for lt in lights}
+            views = [0 if types[lid] == DIRECTIONAL else view_count(types[lid])
+                     for lid in shadow_ids]
+            kept, fitted = fit_atlas(views, tiers, cfg.shadow_atlas_size)
+            shadow_ids, tiers = shadow_ids[:kept], tiers[:kept]
+        else:
+            fitted = tiers
         self._shadowed = dict(zip(shadow_ids, tiers, strict=True))
-        return shadow_ids, tiers
+        return shadow_ids, fitted, importance
+
+    def _shadow_views(self, frame: Any, lights: list[_Light], objects: list[_Object],
+                      shadow_ids: list[int], tiers: list[int], importance: dict[int, float],
+                      casters: list[list[tuple[_Object, int]]], cameras: list[Camera]
+                      ) -> tuple[list[bool], dict[str, int]]:
+        """DESIGN section 2, "Shadow views, updates and the atlas": every shadow light's
+        views with their atlas tiles, which are dirty (and why: static or not), which are
+        rendered this frame within the budget, and what each view now holds. Writes
+        shadow_views, shadow_dirty, shadow_static_dirty, shadow_update and shadow_rect;
+        returns per shadow light whether every view is ready, and the stats counts."""
+        cfg = self.config
+        atlas, n_casc = cfg.shadow_atlas_size, cfg.cascades
+        by_id = {lt.id: lt for lt in lights}
+        obj_by_id = {ob.id: ob for ob in objects}
+        named = {int(x) for ids in self.objects.named for x in ids}
+        cam_ids = [camera_id(k, c) for k, c in enumerate(cameras)]
+        cam_states = [_camera_state(c, cascade_splits(CameraFrame(c), cfg)) for c in cameras]
+        # A light that leaves shadow_lights forgets its views.
+        live = set(shadow_ids)
+        self._views = {key: v for key, v in self._views.items() if key[0] in live}
+
+        wanted = []
+        for j, lid in enumerate(shadow_ids):
+            lt = by_id[lid]
+            if lt.type != DIRECTIONAL:
+                wanted += [((lid, bit), tiers[j], (j, bit)) for bit in range(view_count(lt.type))]
+        prev_tiles = self._tiles
+        tiles = allocate_tiles(wanted, prev_tiles, atlas) if atlas else {}
+        moved = sum(1 for key, t in tiles.items() if key in prev_tiles and prev_tiles[key] != t)
+        self._tiles = tiles
+
+        S = len(shadow_ids)
+        out = {name: [0] * S for name in ("views", "dirty", "static", "update")}
+        rect = np.full((S, 6, 3), -1, np.int32)
+        entries = []  # (j, bit, view, state, directional, dirty)
+        for j, lid in enumerate(shadow_ids):
+            lt = by_id[lid]
+            if lt.type == DIRECTIONAL:
+                light_state: tuple[Any, ...] = (lt.type, lt.direction)
+                bits = [(k * n_casc + c, (lid, "camera", cam_ids[k], c), cam_states[k])
+                        for k in range(len(cameras)) for c in range(n_casc)]
+            else:
+                light_state = (lt.type, lt.position, lt.radius)
+                if lt.type == SPOT:
+                    light_state += (lt.direction, lt.outer)
+                bits = [(bit, (lid, bit), None) for bit in range(view_count(lt.type))]
+            for bit, key, cam_state in bits:
+                held_now = {ob.id: (ob.lo, ob.hi, ob.casts, ob.mask, ob.static)
+                            for ob, mask in casters[j] if mask >> bit & 1}
+                tile = tiles.get(key)
+                if tile is not None:
+                    rect[j, bit] = tile
+                state = {"light": light_state, "tier": tiers[j], "tile": tile,
+                         "camera": cam_state, "casters": held_now}
+                view = self._views.get(key)
+                if view is None:
+                    view = self._views[key] = _View()
+                # A new tile or tier holds nothing of the view until it is drawn there.
+                if view.placed != (tiers[j], tile):
+                    view.ready = False
+                    view.placed = (tiers[j], tile)
+                dirty, static = _view_dirty(view, state, named, obj_by_id)
+                entries.append((j, bit, view, state, lt.type == DIRECTIONAL, dirty, static))
+                out["views"][j] |= 1 << bit
+                out["dirty"][j] |= dirty << bit
+                out["static"][j] |= static << bit
+
+        budget = cfg.shadow_update_budget
+        local = [e for e in entries if e[5] and not e[4]]
+        if budget and len(local) > budget:
+            def order(e: tuple[Any, ...]) -> tuple[Any, ...]:
+                j, bit, view = e[0], e[1], e[2]
+                if not view.ready:
+                    return (0, j, bit)
+                imp = importance[shadow_ids[j]]
+                return (1, -((1 + view.age) * max(imp, 0.0)), -view.age, j, bit)
+            local = sorted(local, key=order)[:budget]
+        chosen = {id(e) for e in local}
+        texels = 0
+        for e in entries:
+            j, bit, view, state, directional, dirty, _ = e
+            if dirty and (directional or id(e) in chosen):
+                view.rendered = state
+                view.ready = True
+                view.named = view.named_static = False
+                view.age = 0
+                out["update"][j] |= 1 << bit
+                texels += tiers[j] * tiers[j]
+            elif dirty:
+                view.age += 1
+            else:
+                view.age = 0
+        ready = [True] * S
+        for j, _, view, *_ in entries:
+            ready[j] = ready[j] and view.ready
+        frame.shadow_views = np.array(out["views"], np.uint32)
+        frame.shadow_dirty = np.array(out["dirty"], np.uint32)
+        frame.shadow_static_dirty = np.array(out["static"], np.uint32)
+        frame.shadow_update = np.array(out["update"], np.uint32)
+        frame.shadow_rect = rect
+        return ready, {"tiles_moved": moved, "texels_rendered": texels}
+
+
+# --------------------------------------------------------------------------- shadow views
+
+MIN_TIER = 256
+
+
+class _View:
+    """One shadow view's memory: what it held when last rendered (None: never), whether
+    its map is ready, its age, whether an update_objects call named a (static) caster of it
+    since, and the (tier, tile) it had last frame."""
+
+    __slots__ = ("rendered", "ready", "age", "named", "named_static", "placed")
+
+    def __init__(self) -> None:
+        self.rendered: dict[str, Any] | None = None
+        self.ready = False
+        self.age = 0
+        self.named = False
+        self.named_static = False
+        self.placed: tuple[int, Any] | None = None
+
+
+def view_count(light_type: int) -> int:
+    """Views of a point (six cube faces) or spot light (one)."""
+    return 1 if light_type == SPOT else 6
+
+
+def camera_id(position: int, cam: Camera) -> int:
+    """A camera's id: its own, or its position in the frame's list (DESIGN section 1)."""
+    return position if cam.id is None else int(cam.id)
+
+
+def _camera_state(cam: Camera, splits: list[float]) -> tuple[Any, ...]:
+    """What a directional view remembers of its camera (DESIGN "Dirty")."""
+    return (_vec(cam.position), _vec(cam.forward), _vec(cam.up), float(cam.fov_y),
+            float(cam.aspect), float(cam.near), float(cam.far), tuple(splits))
+
+
+def fit_atlas(views: list[int], tiers: list[int], atlas: int) -> tuple[int, list[int]]:
+    """DESIGN "Atlas", the fit: ``views`` per shadow light in shadow_lights order (0 for
+    directional ones). Returns how many lights stay (the longest prefix that fits at 256,
+    or all) and their tiers after lowering the last light above 256, one tier at a time,
+    while sum views * tier^2 > atlas^2."""
+    room = atlas * atlas
+    kept, used = len(views), 0
+    for j, v in enumerate(views):
+        used += v * MIN_TIER * MIN_TIER
+        if used > room:
+            kept = j
+            break
+    tiers = list(tiers[:kept])
+    while sum(v * t * t for v, t in zip(views, tiers, strict=False)) > room:
+        j = max(j for j in range(kept) if views[j] and tiers[j] > MIN_TIER)
+        tiers[j] //= 2
+    return kept, tiers
+
+
+def first_fit(tiles: list[tuple[int, int, int]], atlas: int, size: int
+              ) -> tuple[int, int] | None:
+    """The first free aligned size x size square of the atlas in Morton order (quadrants
+    (0, 0), (1, 0), (0, 1), (1, 1), x first), beside ``tiles`` (aligned power-of-two
+    squares: one either holds a node of the quadtree, lies in it or misses it)."""
+    def search(x: int, y: int, s: int, inside: list[tuple[int, int, int]]
+               ) -> tuple[int, int] | None:
+        if not inside:
+            return x, y
+        if s == size or any(t[2] >= s for t in inside):
+            return None
+        h = s // 2
+        for qx, qy in ((x, y), (x + h, y), (x, y + h), (x + h, y + h)):
+            sub = [t for t in inside
+                   if t[0] < qx + h and qx < t[0] + t[2] and t[1] < qy + h and qy < t[1] + t[2]]
+            found = search(qx, qy, h, sub)
+            if found is not None:
+                return found
+        return None
+    return search(0, 0, atlas, list(tiles))
+
+
+def allocate_tiles(wanted: list[tuple[Any, int, tuple[int, int]]],
+                   prev: dict[Any, tuple[int, int, int]], atlas: int
+                   ) -> dict[Any, tuple[int, int, int]]:
+    """Atlas tiles (x, y, size) of the views ``wanted`` ((key, tier, (shadow index, bit)),
+    which fit: sum of tier^2 <= atlas^2). A view keeps last frame's tile (``prev``) while
+    its tier holds; the others are placed largest first (then shadow_lights order, bit) at
+    the first free square in Morton order. When fragmentation leaves one without room,
+    everything is packed again the same way from an empty atlas (largest first in Morton
+    order always fits what the fit rule admits)."""
+    tiles = {key: prev[key] for key, size, _ in wanted if key in prev and prev[key][2] == size}
+    todo = sorted(((size, rank, key) for key, size, rank in wanted if key not in tiles),
+                  key=lambda t: (-t[0], t[1]))
+    for size, _, key in todo:
+        at = first_fit(list(tiles.values()), atlas, size)
+        if at is None:
+            break
+        tiles[key] = (at[0], at[1], size)
+    else:
+        return tiles
+    tiles = {}
+    for size, _, key in sorted(((size, rank, key) for key, size, rank in wanted),
+                               key=lambda t: (-t[0], t[1])):
+        at = first_fit(list(tiles.values()), atlas, size)
+        assert at is not None
+        tiles[key] = (at[0], at[1], size)
+    return tiles
+
+
+def _view_dirty(view: _View, state: dict[str, Any], named: set[int],
+                obj_by_id: dict[int, _Object]) -> tuple[bool, bool]:
+    """(dirty, static dirty) of a view whose state is now ``state`` (DESIGN "Dirty"):
+    against what it held when last rendered, and the update_objects calls since, which
+    the view remembers until it is rendered (``named``: the ids named since last frame)."""
+    held = view.rendered
+    if held is None:
+        return True, True
+    static = any(held[k] != state[k] for k in ("light", "tier", "tile", "camera"))
+    dynamic = False
+    then, now = held["casters"], state["casters"]
+    for oid in then.keys() | now.keys():
+        a, b = now.get(oid), then.get(oid)
+        if a != b:
+            if (a is not None and a[4]) or (b is not None and b[4]):
+                static = True
+            else:
+                dynamic = True
+    for oid in named & (then.keys() | now.keys()):
+        ob = obj_by_id.get(oid)
+        if (ob is not None and ob.static) or (oid in then and then[oid][4]):
+            view.named_static = True
+        else:
+            view.named = True
+    static = static or view.named_static
+    return static or dynamic or view.named, static
 
 
 def _visibility(lights: list[_Light], objects: list[_Object], cams: list[CameraFrame]
@@ -830,23 +1114,30 @@ def _residual(ob: _Object, slots: list[list[Any]], prio: dict[int, float],
 
 
 def _write_casters(frame: Any, lights: list[_Light], objects: list[_Object],
-                   shadow_ids: list[int], cams: list[CameraFrame], cfg: Config) -> None:
+                   shadow_ids: list[int], cams: list[CameraFrame], cfg: Config
+                   ) -> list[list[tuple[_Object, int]]]:
     """caster_offsets, caster_ids and caster_masks (DESIGN section 2, "Casters"): per
-    shadow light, its casters by object id."""
+    shadow light, its casters by object id. Returns them per shadow light as (object,
+    bits)."""
     by_id = {lt.id: lt for lt in lights}
     offsets, ids, masks = [0], [], []
+    per_light = []
     for lid in shadow_ids:
         lt = by_id[lid]
         volumes = culling_volumes(lt, cams, cfg)
+        listed = []
         for ob in sorted(objects, key=lambda o: o.id):
             bits = caster_mask(lt, ob, volumes)
             if bits:
                 ids.append(ob.id)
                 masks.append(bits)
+                listed.append((ob, bits))
         offsets.append(len(ids))
+        per_light.append(listed)
     frame.caster_offsets = np.array(offsets, np.int64)
     frame.caster_ids = np.array(ids, np.int32)
     frame.caster_masks = np.array(masks, np.uint32)
+    return per_light
 
 
 def schedule(lights: dict[str, Any], objects: dict[str, Any], cameras: Any,

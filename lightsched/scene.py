@@ -103,6 +103,9 @@ class Config:
     unshadowed: str = "light"
     precision: str = "exact"
     residual: bool = True
+    shadow_update_budget: int = 0  # point/spot views rendered per frame; 0 = no limit
+    shadow_atlas_size: int = 8192  # texels; 0 = no atlas
+    caster_culling: str = "camera"
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -128,6 +131,16 @@ class Config:
         if self.precision not in ("exact", "fast"):
             raise ValidationError("precision", None, f"must be 'exact' or 'fast', got {self.precision!r}")
         _check_bool(self, "residual")
+        set_(self, "shadow_update_budget",
+             _check_int("shadow_update_budget", self.shadow_update_budget, 0, 2**31 - 1))
+        atlas = _check_int("shadow_atlas_size", self.shadow_atlas_size, 0, 65536)
+        if atlas != 0 and (atlas < 4096 or atlas & (atlas - 1)):
+            raise ValidationError("shadow_atlas_size", None,
+                                  f"must be 0 or a power of two from 4096 to 65536, got {atlas}")
+        set_(self, "shadow_atlas_size", atlas)
+        if self.caster_culling not in ("camera", "light"):
+            raise ValidationError("caster_culling", None,
+                                  f"must be 'camera' or 'light', got {self.caster_culling!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -662,6 +675,10 @@ class ObjectStore:
     version: int = 0
     # Rows that update_objects calls wrote since the last frame (see LightStore.touched).
     touched: tuple[np.ndarray, ...] = ()
+    # Ids that update_objects calls named since the last frame, whatever the values (DESIGN
+    # section 2, "Dirty": a re-sent caster dirties its shadow views); kept through set_ and
+    # remove_ calls, which renumber rows but not ids.
+    named: tuple[np.ndarray, ...] = ()
     # (the id array it was built from, id -> row table or None): see _bulk_rows.
     rows_by_id: Any = field(default=None, repr=False, compare=False)
 
@@ -809,6 +826,8 @@ def _update(store: Any, validate: Any, names: tuple[str, ...], fields: dict[str,
             _put_rows(arr, rows, new)
         setattr(store, f, arr)
     store.touched = store.touched + (rows,)
+    if what == "object":
+        store.named = store.named + (ids,)
     store.version += 1
 
 
@@ -946,6 +965,7 @@ class SceneAPI:
         result = self._frame(cams, dt_, bool(cut))
         self.lights.touched = ()
         self.objects.touched = ()
+        self.objects.named = ()
         # Replaced, not cleared in place: a snapshot (``transaction``) may share the array.
         if self.objects.is_new.any():
             self.objects.is_new = np.zeros_like(self.objects.is_new)

@@ -10,6 +10,7 @@ in order, each a function of its own room with typed inputs and outputs:
     pairs       pairs.find_pairs         -> Pairs
     shadows     shadows.choose_shadows   -> ShadowSet
     casters     casters.find_casters     -> Casters
+    views       shadow_views.update_views -> ShadowViews (and the ShadowSet the slots see)
     lists       pair_cache.update_pair_cache -> PairCache
     objects     objects.select_and_fade  -> Outputs
     output      frame.py                 -> Frame
@@ -45,6 +46,7 @@ from .pairs import Pairs, find_pairs
 from .plan import UNCHANGED, FramePlan, plan_frame
 from .priority import Packed, pack
 from .scene import Camera, Config, SceneAPI, ValidationError
+from .shadow_views import ShadowViews, update_views
 from .shadows import ShadowSet, choose_shadows
 from .tuning import Tuning
 from .visibility import Visibility, see
@@ -66,6 +68,7 @@ class FrameState:
     pairs: Pairs
     shadows: ShadowSet
     casters: Casters
+    views: ShadowViews
     cache: PairCache
     outputs: Outputs
     frame: Frame
@@ -86,20 +89,24 @@ class Scheduler(SceneAPI):
         # Last frame's shadow lights: the ranking's hysteresis remembers them even after a
         # frame that stopped half way (which leaves no FrameState behind).
         self._shadows: ShadowSet | None = None
+        # Last frame's shadow views (what each view held when rendered, the atlas tiles),
+        # kept like the shadow lights.
+        self._views: ShadowViews | None = None
         self._buffers = Buffers()
         # What explain reads of the last frame; dropped when the next one starts, so that
         # the output arrays it references can be taken back (buffers.SpareOutputs).
         self._explained: ExplainRecord | None = None
 
-    def _memory(self) -> tuple[ShadowSet | None, ExplainRecord | None]:
-        return self._shadows, self._explained
+    def _memory(self) -> tuple[ShadowSet | None, ExplainRecord | None, ShadowViews | None]:
+        return self._shadows, self._explained, self._views
 
-    def _put_back(self, memory: tuple[ShadowSet | None, ExplainRecord | None]) -> None:
+    def _put_back(self, memory: tuple[ShadowSet | None, ExplainRecord | None,
+                                      ShadowViews | None]) -> None:
         # The stores are put back, not the frames: last frame's stage outputs may be of
         # the frame that was undone, so the next frame is a full one. explain goes on
         # answering for the last frame that was not undone.
         self._last = None
-        self._shadows, self._explained = memory
+        self._shadows, self._explained, self._views = memory
 
     def _frame(self, cameras: list[Camera], dt: float, cut: bool) -> Frame:
         cfg, tuning, buffers = self.config, self.tuning, self._buffers
@@ -113,7 +120,8 @@ class Scheduler(SceneAPI):
             cameras, None if last is None else last.cameras, cfg.cascades, cfg.shadow_distance))
         changes = clock.lap("changes", find_changes(
             None if last is None else last.changes, lights, objects))
-        plan = plan_frame(last, changes, cams, cut, self.frame_index, cfg, tuning)
+        plan = plan_frame(last, changes, cams, cut, self.frame_index, cfg, tuning,
+                          quiet=_quiet(last, objects))
         if plan.kind == UNCHANGED:
             return self._repeat(last, plan, clock, prior)
         began = self._began(prior)
@@ -132,26 +140,33 @@ class Scheduler(SceneAPI):
                                                       vis.lights, packed, grid, cfg))
         casters = clock.lap("casters", find_casters(
             plan, None if last is None else last.casters, changes, lights, objects, shadows,
-            packed, grid, cams, vis.objects, cfg.cascade_overlap, tuning))
+            packed, grid, cams, vis.objects, cfg.cascade_overlap, tuning,
+            cfg.caster_culling == "light"))
+        views, shadows_seen = clock.lap("views", update_views(
+            self._views, shadows, casters, lights, objects, cams, cameras, cfg))
+        # The ranking's memory is the set as ranked; the slots see which maps are ready.
+        self._shadows = shadows
+        shadows = shadows_seen
         cache = clock.lap("lists", update_pair_cache(plan, last, pairs, shadows, vis, packed,
                                                      grid, changes.light_rows, tuning, buffers))
         outputs = clock.lap("objects", select_and_fade(
             plan, last, cache, packed, shadows, vis.objects, lights, objects,
             changes.object_rows is None, cfg, dt, buffers))
-        frame = self._output(last, cams, vis, shadows, casters, outputs)
-        self._shadows = shadows
+        frame = self._output(last, cams, vis, shadows, casters, views, outputs)
+        self._views = views
         self._explained = ExplainRecord(
             self.frame_index, cfg, *self.snapshot(), frame, shadows.live, vis.lights, cache.seg,
             cache.heap, objects.get("selected"), *began)
-        self._last = FrameState(changes, cams, vis, packed, grid, pairs, shadows, casters, cache,
-                                outputs, frame)
+        self._last = FrameState(changes, cams, vis, packed, grid, pairs, shadows, casters, views,
+                                cache, outputs, frame)
         clock.lap("output", None)
         how = {"visibility": vis.how, "grid": grid.text, "pairs": pairs.how,
-               "shadows": shadows.how, "casters": casters.how, "lists": cache.how,
+               "shadows": shadows.how, "casters": casters.how, "views": views.how,
+               "lists": cache.how,
                "objects": outputs.how}
         frame.stats = {"plan": plan.describe(cfg, tuning, len(cams.frames), how),
-                       "counts": self._counts(changes, vis, packed, shadows, casters, cache,
-                                              outputs, frame),
+                       "counts": self._counts(changes, vis, packed, shadows, casters, views,
+                                              cache, outputs, frame),
                        "seconds": clock.seconds()}
         return frame
 
@@ -175,7 +190,8 @@ class Scheduler(SceneAPI):
         return explain_record(self._explained, object_id)
 
     def _output(self, last: FrameState | None, cams: Cameras, vis: Visibility,
-                shadows: ShadowSet, casters: Casters, outputs: Outputs) -> Frame:
+                shadows: ShadowSet, casters: Casters, views: ShadowViews,
+                outputs: Outputs) -> Frame:
         """The output stage: the frame (read-only) from the stages' outputs."""
         objects = self.objects
         given = dict(outputs.arrays)
@@ -187,10 +203,13 @@ class Scheduler(SceneAPI):
             objects.id, self.config.max_lights, self.config.cascades, **given,
             directional_lights=shadows.directional, visible_lights=self.lights.id[vis.lights],
             cascade_splits=cams.splits, shadow_lights=shadows.ids, shadow_tier=shadows.tier,
-            caster_offsets=casters.offsets, caster_ids=casters.ids, caster_masks=casters.masks))
+            caster_offsets=casters.offsets, caster_ids=casters.ids, caster_masks=casters.masks,
+            shadow_views=views.views, shadow_dirty=views.dirty,
+            shadow_static_dirty=views.static_dirty, shadow_update=views.update,
+            shadow_rect=views.rect, camera_ids=views.camera_ids))
 
     def _counts(self, changes: Changes, vis: Visibility, packed: Packed, shadows: ShadowSet,
-                casters: Casters, cache: PairCache, outputs: Outputs,
+                casters: Casters, views: ShadowViews, cache: PairCache, outputs: Outputs,
                 frame: Frame) -> dict[str, int]:
         n, n_l, k = len(self.objects), len(self.lights), self.config.max_lights
         return {
@@ -204,6 +223,8 @@ class Scheduler(SceneAPI):
             "slots": int(frame.count.sum(dtype=np.int32 if n * k < 2**31 else np.int64)),
             "shadow_lights": int(shadows.rows.size),
             "casters": int(casters.ids.size),
+            "tiles_moved": views.tiles_moved,
+            "texels_rendered": views.texels,
             "recomputed_objects": int(outputs.run.size),
             "changed_lights": n_l if changes.light_rows is None else int(changes.light_rows.size),
             "changed_objects": n if changes.object_rows is None
@@ -229,10 +250,22 @@ class Scheduler(SceneAPI):
         frame.stats = {
             "plan": plan_text,
             "counts": dict(last.frame.stats["counts"], recomputed_objects=0, changed_lights=0,
-                           changed_objects=0),
+                           changed_objects=0, tiles_moved=0, texels_rendered=0),
             "seconds": clock.seconds(),
         }
         return frame
+
+
+def _quiet(last: FrameState | None, objects: Any) -> bool:
+    """No update_objects call since last frame named one of its casters: a re-sent caster
+    dirties its shadow views even with its values unchanged (DESIGN "Dirty"); other
+    objects re-sent unchanged leave the frame unchanged. (Last frame's casters are what a
+    clean view holds; a view still dirty keeps the frame from being unchanged anyway.)"""
+    if not objects.named:
+        return True
+    if last is None:
+        return False
+    return not np.isin(np.concatenate(objects.named), last.casters.ids).any()
 
 
 class _Clock:

@@ -19,7 +19,7 @@ import numpy as np
 
 from .frustum import CameraFrames
 from .priority import Packed, berka_eccentricity
-from .scene import DIRECTIONAL, Config, LightStore
+from .scene import DIRECTIONAL, SPOT, Config, LightStore
 from .select import F_NEW_W, I_NEW_ROW
 from .walk import affects_any
 
@@ -46,6 +46,10 @@ class ShadowSet:
     live: np.ndarray
     directional: np.ndarray
     settled: bool
+    # The tiers before the atlas lowered them (the tier hysteresis' memory) and each
+    # shadow light's importance without the hysteresis bonus (the update budget's order).
+    ranked_tier: np.ndarray
+    importance: np.ndarray
 
     @property
     def how(self) -> str:
@@ -66,14 +70,21 @@ def choose_shadows(last: ShadowSet | None, lights: LightStore, frames: CameraFra
     lights outside the slots. ``visible``: the lights' visibility."""
     candidate = visible & lights.shadows
     rows, tier = np.zeros(0, np.int32), np.zeros(0, np.uint16)
+    ranked, importance = tier, np.zeros(0)
     if candidate.any():
         cand_rows = np.flatnonzero(candidate).astype(np.int32)
         candidate[cand_rows] = affects_any(packed.rows, cand_rows, grid.index, grid.records)
-        prev_ids, prev_tiers = NO_SHADOWS if last is None else (last.ids,
-                                                                last.tier.astype(np.int64))
-        rows, tier = rank_shadow_lights(lights, frames, candidate, prev_ids, prev_tiers,
-                                        config.shadow_budget, config.hysteresis,
-                                        config.hysteresis_abs, config.c1)
+        prev_ids, prev_tiers = NO_SHADOWS if last is None else (
+            last.ids, last.ranked_tier.astype(np.int64))
+        rows, ranked, importance = rank_shadow_lights(
+            lights, frames, candidate, prev_ids, prev_tiers, config.shadow_budget,
+            config.hysteresis, config.hysteresis_abs, config.c1)
+        tier = ranked
+        if config.shadow_atlas_size and rows.size:
+            views = view_counts(lights.type[rows])
+            kept, fitted = fit_atlas(views.tolist(), ranked.tolist(), config.shadow_atlas_size)
+            rows, ranked, importance = rows[:kept], ranked[:kept], importance[:kept]
+            tier = np.array(fitted, np.uint16)
     shadow_of_row = np.full(len(lights), -1, np.int8)
     shadow_of_row[rows] = np.arange(rows.size)
     live = visible.copy()
@@ -91,7 +102,39 @@ def choose_shadows(last: ShadowSet | None, lights: LightStore, frames: CameraFra
     # (At most shadow_budget <= 127 ids: Python's sort, not numpy's calls.)
     settled = sorted([] if last is None else last.ids.tolist()) == sorted(ids.tolist())
     return ShadowSet(rows, ids, tier, int(np.count_nonzero(candidate)), shadow_of_row, live,
-                     lights.id[dir_rows].astype(np.int32), settled)
+                     lights.id[dir_rows].astype(np.int32), settled, ranked, importance)
+
+
+def view_counts(types: np.ndarray) -> np.ndarray:
+    """Views per light of ``types``: a point light's six cube faces, a spot light's one, and
+    0 for a directional light, whose cascades are not in the atlas (DESIGN "Shadow views")."""
+    return np.where(types == DIRECTIONAL, 0, np.where(types == SPOT, 1, 6))
+
+
+def fit_atlas(views: list[int], tiers: list[int], atlas: int) -> tuple[int, list[int]]:
+    """DESIGN section 2, "Atlas", the fit rule: the point and spot shadow lights fit iff
+    sum views * tier^2 <= atlas^2. ``views``, ``tiers``: per shadow light in shadow_lights
+    order. Returns how many lights stay (the longest prefix that fits at 256: the others
+    leave shadow_lights this frame) and their tiers after the last light above 256 dropped
+    one tier at a time until the rest fit. Python ints: at most 127 lights."""
+    room = atlas * atlas
+    floor = MIN_TIER * MIN_TIER
+    kept, used = len(views), 0
+    for j, v in enumerate(views):
+        used += v * floor
+        if used > room:
+            kept = j
+            break
+    out = list(tiers[:kept])
+    area = sum(views[j] * out[j] * out[j] for j in range(kept))
+    last = kept - 1
+    while area > room:
+        # The last light above 256 drops first; once it is at 256, the one before it.
+        while not (views[last] and out[last] > MIN_TIER):
+            last -= 1
+        area -= views[last] * (out[last] * out[last] - (out[last] // 2) ** 2)
+        out[last] //= 2
+    return kept, out
 
 MIN_TIER, MAX_TIER = 256, 4096
 
@@ -124,12 +167,13 @@ def _rank(candidate, light, cams, prev, params):
     candidates, too few to pay for the ~20 numpy calls this replaced (their per-call
     overhead) or for a parallel launch. light = (type, id, intensity, priority, position,
     radius); prev = (last frame's ids, their tiers); params = (budget, h, h_abs, c1).
-    Returns (rows, tiers)."""
+    Returns (rows, tiers, importance without the hysteresis bonus)."""
     typ, ids, intensity, prio, position, radius = light
     budget, h, h_abs, c1 = int(params[0]), params[1], params[2], params[3]
     rows = np.flatnonzero(candidate)
     m = rows.shape[0]
     neg_key = np.empty(m)
+    plain = np.empty(m)  # the key without the hysteresis bonus
     s_max = np.zeros(m)
     was = np.full(m, -1, np.int64)  # last frame's tier, or -1
     prev_at = np.argsort(prev[0])
@@ -140,6 +184,7 @@ def _rank(candidate, light, cams, prev, params):
             key = intensity[j] + prio[j]
         else:
             key, s_max[t] = _importance(j, position, radius, intensity, prio, cams, c1)
+        plain[t] = key
         at = np.searchsorted(prev_sorted, ids[j])
         if at < prev_sorted.shape[0] and prev_sorted[at] == ids[j]:
             key = key + h * abs(key) + h_abs
@@ -163,9 +208,11 @@ def _rank(candidate, light, cams, prev, params):
     n_out = min(budget, m)
     chosen = np.empty(n_out, np.int32)
     tier = np.empty(n_out, np.uint16)
+    importance = np.empty(n_out)
     for q in range(n_out):
         t = order[q]
         chosen[q] = rows[t]
+        importance[q] = plain[t]
         if typ[rows[t]] == DIRECTIONAL:
             tier[q] = MAX_TIER
             continue
@@ -176,13 +223,14 @@ def _rank(candidate, light, cams, prev, params):
         if was[t] >= 0 and was[t] / (2 * (1 + h)) <= s <= was[t] * (1 + h):
             value = was[t]
         tier[q] = value
-    return chosen, tier
+    return chosen, tier, importance
 
 
 def rank_shadow_lights(lights: LightStore, frames: CameraFrames, candidate: np.ndarray,
                        prev_ids: np.ndarray, prev_tiers: np.ndarray, budget: int, h: float,
-                       h_abs: float, c1: float) -> tuple[np.ndarray, np.ndarray]:
-    """(rows of the shadow lights in rank order, their tiers) for the candidate rows.
+                       h_abs: float, c1: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows of the shadow lights in rank order, their tiers, their importance without the
+    hysteresis bonus) for the candidate rows.
 
     Directional candidates rank first, among themselves by i + p_user; the others by
     importance. A light shadowed last frame competes with key + h|key| + h_abs; ties go to

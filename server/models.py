@@ -64,6 +64,9 @@ class ConfigModel(BaseModel):
     unshadowed: Literal["light", "skip"] | None = None
     precision: Literal["exact", "fast"] | None = None
     residual: bool | None = None
+    shadow_update_budget: int | None = None
+    shadow_atlas_size: int | None = None
+    caster_culling: Literal["camera", "light"] | None = None
 
 
 class CameraModel(BaseModel):

@@ -58,7 +58,8 @@ FLOAT_FIELDS = ("priority", "fade_weight")
 ROW_FIELDS = ("light_ids", "light_index", "priority", "fade_weight", "fade_state")
 EXACT_FIELDS = ("object_id", "visible", "count", "candidates", "directional_lights",
                 "visible_lights", "slot_shadow", "shadow_lights", "shadow_tier",
-                "caster_offsets", "caster_ids", "caster_masks")
+                "caster_offsets", "caster_ids", "caster_masks", "shadow_views", "shadow_dirty",
+                "shadow_static_dirty", "shadow_update", "shadow_rect", "camera_ids")
 
 
 class OracleP:

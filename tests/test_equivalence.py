@@ -121,6 +121,9 @@ def configs(draw) -> ls.Config:
         cascades=draw(st.integers(1, 4)),
         shadow_distance=draw(st.sampled_from([150.0, 30.0, 5.0, 0.5])),
         cascade_overlap=draw(st.sampled_from([0.1, 0.0, 0.5])),
+        shadow_update_budget=draw(st.sampled_from([0, 0, 1, 3, 8])),
+        shadow_atlas_size=draw(st.sampled_from([8192, 8192, 4096, 0])),
+        caster_culling=draw(st.sampled_from(["camera", "light"])),
     )
 
 

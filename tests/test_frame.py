@@ -51,7 +51,8 @@ def test_frame_fields_are_the_one_field_list():
     assert PER_OBJECT["residual"] == (np.float32, "N4", 0.0)
     f = empty_frame(np.array([4, 9, 12], np.int32), k=3, cascades=2)
     shapes = {"object_id": (3,), "visible": (3,), "count": (3,), "candidates": (3,),
-              "cascade_splits": (0, 3), "caster_offsets": (1,), "residual": (3, 4)}
+              "cascade_splits": (0, 3), "caster_offsets": (1,), "residual": (3, 4),
+              "shadow_rect": (0, 6, 3)}
     for field in FIELDS:
         a = getattr(f, field.name)
         assert a.dtype == np.dtype(field.dtype), field.name

@@ -53,7 +53,8 @@ def test_point_light_contribution_by_hand():
     assert f.light_index[0, 1:].tolist() == [-1] * 7
     assert f.priority[0, 1:].tolist() == [0.0] * 7
     assert f.slot_shadow.tolist() == [[-1] * 8]
-    assert f.stats["counts"] == {"visible_objects": 1, "visible_lights": 1, "pairs": 1}
+    assert f.stats["counts"] == {"visible_objects": 1, "visible_lights": 1, "pairs": 1,
+                                 "tiles_moved": 0, "texels_rendered": 0}
     assert f.stats["plan"] == {"all": "reference"}
 
 
@@ -393,7 +394,8 @@ def test_no_lights():
                      Config(max_lights=3))
     assert f.light_ids.tolist() == [[-1, -1, -1]] and f.visible.tolist() == [True]
     assert f.directional_lights.dtype == np.int32 and f.visible_lights.size == 0
-    assert f.stats["counts"] == {"visible_objects": 1, "visible_lights": 0, "pairs": 0}
+    assert f.stats["counts"] == {"visible_objects": 1, "visible_lights": 0, "pairs": 0,
+                                 "tiles_moved": 0, "texels_rendered": 0}
 
 
 def test_empty_scene_and_shapes():
@@ -402,4 +404,5 @@ def test_empty_scene_and_shapes():
                      Config(max_lights=3))
     assert f.light_ids.shape == (0, 3)
     assert f.directional_lights.dtype == np.int32 and f.visible_lights.size == 0
-    assert f.stats["counts"] == {"visible_objects": 0, "visible_lights": 0, "pairs": 0}
+    assert f.stats["counts"] == {"visible_objects": 0, "visible_lights": 0, "pairs": 0,
+                                 "tiles_moved": 0, "texels_rendered": 0}

@@ -846,6 +846,15 @@ def test_update_that_makes_a_row_invalid(s):
     ({"directional_in_slots": "yes"}, "directional_in_slots"),
     ({"residual": 1}, "residual"),
     ({"residual": "true"}, "residual"),
+    ({"shadow_update_budget": -1}, "shadow_update_budget"),
+    ({"shadow_update_budget": 2**31}, "shadow_update_budget"),
+    ({"shadow_update_budget": 1.0}, "shadow_update_budget"),
+    ({"shadow_atlas_size": 2048}, "shadow_atlas_size"),
+    ({"shadow_atlas_size": 12288}, "shadow_atlas_size"),
+    ({"shadow_atlas_size": 131072}, "shadow_atlas_size"),
+    ({"shadow_atlas_size": True}, "shadow_atlas_size"),
+    ({"caster_culling": "Light"}, "caster_culling"),
+    ({"caster_culling": None}, "caster_culling"),
 ])
 def test_config_ranges(kwargs, field):
     with pytest.raises(ValidationError) as info:
@@ -861,7 +870,8 @@ def test_config_defaults_and_edges():
         "fade_in": 0.25, "fade_out": 0.25, "directional_in_slots": False, "shadow_budget": 4,
         "cascades": 4, "shadow_distance": 150.0, "cascade_overlap": 0.1,
         "max_shadowed_per_object": 2, "unshadowed": "light", "precision": "exact",
-        "residual": True}
+        "residual": True, "shadow_update_budget": 0, "shadow_atlas_size": 8192,
+        "caster_culling": "camera"}
     assert Config(max_lights=1).max_shadowed_per_object == 1
     for k in (1, 32):
         Config(max_lights=k, max_shadowed_per_object=k)

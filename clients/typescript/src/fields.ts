@@ -32,6 +32,12 @@ export const FRAME_FIELDS: readonly FrameField[] = [
   {"name": "caster_ids", "dtype": "int32", "shape": ["M"], "per_object": false, "empty": null, "description": "shadow caster object ids, ascending per light"},
   {"name": "caster_masks", "dtype": "uint32", "shape": ["M"], "per_object": false, "empty": null, "description": "per caster: the views it is drawn into (point: cube faces; spot: bit 0; directional: bit camera * C + cascade)"},
   {"name": "residual", "dtype": "float32", "shape": ["N", "4"], "per_object": true, "empty": 0.0, "description": "L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in the slots; the shader adds max(0, a/4 + (b . n)/2)"},
+  {"name": "shadow_views", "dtype": "uint32", "shape": ["S"], "per_object": false, "empty": null, "description": "per shadow light its views, as caster_masks' bits (point: the six faces; spot: bit 0; directional: bit camera * C + cascade)"},
+  {"name": "shadow_dirty", "dtype": "uint32", "shape": ["S"], "per_object": false, "empty": null, "description": "the views whose casters, light, camera, tier or tile changed since they were last rendered (or never were)"},
+  {"name": "shadow_static_dirty", "dtype": "uint32", "shape": ["S"], "per_object": false, "empty": null, "description": "the dirty views whose cached static-caster layer must be redrawn too"},
+  {"name": "shadow_update", "dtype": "uint32", "shape": ["S"], "per_object": false, "empty": null, "description": "the dirty views to render this frame (shadow_update_budget)"},
+  {"name": "shadow_rect", "dtype": "int32", "shape": ["S", "6", "3"], "per_object": false, "empty": null, "description": "per shadow light and view bit its atlas tile (x, y, size); -1 where there is none (directional lights, unused rows, no atlas)"},
+  {"name": "camera_ids", "dtype": "int32", "shape": ["cameras"], "per_object": false, "empty": null, "description": "the cameras' ids in list order (directional view bits and cascade_splits rows follow it)"},
 ];
 
 export type FieldName =
@@ -53,7 +59,13 @@ export type FieldName =
   | "caster_offsets"
   | "caster_ids"
   | "caster_masks"
-  | "residual";
+  | "residual"
+  | "shadow_views"
+  | "shadow_dirty"
+  | "shadow_static_dirty"
+  | "shadow_update"
+  | "shadow_rect"
+  | "camera_ids";
 
 /** The arrays of a frame; those not asked for (outputs) are absent. */
 export interface FrameArrays {
@@ -95,6 +107,18 @@ export interface FrameArrays {
   caster_masks?: NdArray<Uint32Array>;
   /** L1 SH irradiance (a, b_x, b_y, b_z) of the competing lights not wholly in the slots; the shader adds max(0, a/4 + (b . n)/2) (float32 [N, 4]) */
   residual?: NdArray<Float32Array>;
+  /** per shadow light its views, as caster_masks' bits (point: the six faces; spot: bit 0; directional: bit camera * C + cascade) (uint32 [S]) */
+  shadow_views?: NdArray<Uint32Array>;
+  /** the views whose casters, light, camera, tier or tile changed since they were last rendered (or never were) (uint32 [S]) */
+  shadow_dirty?: NdArray<Uint32Array>;
+  /** the dirty views whose cached static-caster layer must be redrawn too (uint32 [S]) */
+  shadow_static_dirty?: NdArray<Uint32Array>;
+  /** the dirty views to render this frame (shadow_update_budget) (uint32 [S]) */
+  shadow_update?: NdArray<Uint32Array>;
+  /** per shadow light and view bit its atlas tile (x, y, size); -1 where there is none (directional lights, unused rows, no atlas) (int32 [S, 6, 3]) */
+  shadow_rect?: NdArray<Int32Array>;
+  /** the cameras' ids in list order (directional view bits and cascade_splits rows follow it) (int32 [cameras]) */
+  camera_ids?: NdArray<Int32Array>;
 }
 
 // Scheduler.explain (DESIGN section 7): its reasons, in their order, and its columns.

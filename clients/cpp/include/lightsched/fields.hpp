@@ -14,7 +14,7 @@ struct FrameField {
   int empty;  // a per-object row's value when the object has nothing
 };
 
-inline constexpr std::array<FrameField, 19> FRAME_FIELDS{{
+inline constexpr std::array<FrameField, 25> FRAME_FIELDS{{
     {"object_id", "int32", 1, false, 0},
     {"visible", "bool", 1, true, 0},
     {"count", "int32", 1, true, 0},
@@ -34,6 +34,12 @@ inline constexpr std::array<FrameField, 19> FRAME_FIELDS{{
     {"caster_ids", "int32", 1, false, 0},
     {"caster_masks", "uint32", 1, false, 0},
     {"residual", "float32", 2, true, 0},
+    {"shadow_views", "uint32", 1, false, 0},
+    {"shadow_dirty", "uint32", 1, false, 0},
+    {"shadow_static_dirty", "uint32", 1, false, 0},
+    {"shadow_update", "uint32", 1, false, 0},
+    {"shadow_rect", "int32", 3, false, 0},
+    {"camera_ids", "int32", 1, false, 0},
 }};
 
 }  // namespace lightsched
