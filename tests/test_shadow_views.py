@@ -239,6 +239,31 @@ def test_budget_order_not_ready_first_then_age_times_importance(cls):
 
 
 @SCHEDULERS
+def test_budget_lets_a_view_of_importance_at_most_0_wait_for_ever(cls):
+    """DESIGN's budget order scores a ready view (1 + age) * max(importance, 0): a light
+    whose importance is <= 0 (a negative priority) scores 0 however long it waits, so while
+    another light's views go dirty every frame it is never drawn again, and its map stays
+    stale for good. DESIGN as written; the order would need the age to count alone (or a
+    floor on the score) for the wait to be bounded."""
+    s = cls(ls.Config(shadow_update_budget=6))
+    position = np.array([[0.0, 0.0, 10.0], [3.0, 0.0, 10.0]])
+    s.set_lights(id=[1, 2], position=position, radius=[4, 4], intensity=[1, 2],
+                 priority=[-100.0, 0.0], shadows=[True, True])
+    s.set_objects(id=[0], bounds_min=[[-5, -5, 8]], bounds_max=[[5, 5, 9]])
+    drawn_1 = []
+    for frame in range(20):
+        # Both lights move a little every frame: all twelve faces are dirty every frame.
+        s.update_lights(id=[1, 2], position=position + [0.0, 0.01 * frame, 0.0])
+        f = s.frame([cam()])
+        at = {int(lid): i for i, lid in enumerate(f.shadow_lights)}
+        assert set(at) == {1, 2}
+        assert f.shadow_dirty[at[1]] == 63 and f.shadow_dirty[at[2]] == 63
+        drawn_1.append(int(f.shadow_update[at[1]]))
+    # Light 2's faces first, then light 1's (not ready), then light 2's for ever.
+    assert drawn_1[:2] == [0, 63] and not any(drawn_1[2:])
+
+
+@SCHEDULERS
 def test_skip_light_with_unready_view_affects_nothing(cls):
     s = cls(ls.Config(shadow_update_budget=1, unshadowed="skip"))
     s.set_lights(id=[1], position=[[0, 0, 10]], radius=[4], shadows=[True])
