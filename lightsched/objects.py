@@ -121,13 +121,12 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
     Residual (residual_gather once a row's slots are written, residual_flush by batches);
-    k_static = a
-    tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows; visible, reset:
-    bool [N]; live_id: int32 [L].
+    k_static = a tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows;
+    visible, reset: bool [N]; live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
-    "Residual";
-    section 3 (the per-object outputs and their empty slots); section 6 (only ``run``).
+    "Residual"; section 3 (the per-object outputs and their empty slots); section 6 (only
+    ``run``).
 
     Most objects of a scene in motion are steady: last frame's slots are all on and hold
     exactly this frame's selection, so only P changes. They skip the fade machine (its
