@@ -598,6 +598,38 @@ def apply_changes(s: Any, todo: list[tuple[str, dict[str, np.ndarray]]]) -> None
         getattr(s, op)(**fields)
 
 
+def scene_mirror(scene: CityScene) -> SceneAPI:
+    """The scene's stores without a scheduler: what the metrics read each frame."""
+    mirror = SceneAPI()
+    mirror.set_lights(**scene.lights)
+    mirror.set_objects(**scene.objects)
+    return mirror
+
+
+def measured_subset(n: int, max_objects: int, seed: int) -> np.ndarray:
+    """bool [n]: every object, or a seeded choice of ``max_objects`` of them."""
+    subset = np.zeros(n, bool)
+    if n <= max_objects:
+        subset[:] = True
+    else:
+        subset[np.random.default_rng(seed).choice(n, max_objects, replace=False)] = True
+    return subset
+
+
+def lockstep(scene: CityScene, motion: str, mirror: SceneAPI, scheds: dict[tuple, Any],
+             frames: int, seed: int, desc: str
+             ) -> Iterator[tuple[np.ndarray, np.ndarray, list[Camera]]]:
+    """Frame by frame: applies frame i's changes to the mirror and every scheduler, then
+    yields (the sample points and normals of the mirror's boxes, the cameras)."""
+    for i in tqdm(range(frames), desc=desc, unit="frame", file=sys.stderr, leave=False):
+        todo = changes(scene, motion, i)
+        for s in [mirror, *scheds.values()]:
+            apply_changes(s, todo)
+        points, normals = face_samples(mirror.objects.bounds_min, mirror.objects.bounds_max,
+                                       seed=seed)
+        yield points, normals, camera_at(scene.cameras, i)
+
+
 @contextlib.contextmanager
 def numba_threads(n: int) -> Iterator[None]:
     """Runs the block with ``n`` numba threads: the measurement passes (not timed) use one,
@@ -847,16 +879,10 @@ def metrics_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: 
     """Steps every run's fast Scheduler in lockstep over the animated sequence and measures
     captured lighting and popping of each, plus the nearest and brightest policies, on the
     visible objects of a fixed seeded subset of at most ``max_objects`` objects."""
-    mirror = SceneAPI()
-    mirror.set_lights(**scene.lights)
-    mirror.set_objects(**scene.objects)
+    mirror = scene_mirror(scene)
     lights, objects = mirror.lights, mirror.objects
     n = len(objects)
-    subset = np.zeros(n, bool)
-    if n <= max_objects:
-        subset[:] = True
-    else:
-        subset[np.random.default_rng(seed).choice(n, max_objects, replace=False)] = True
+    subset = measured_subset(n, max_objects, seed)
     scheds = {key: new_scheduler(lightsched.Scheduler, r, scene) for key, r in runs.items()}
     accs = {key: Acc() for key in runs}
     pol = {(p, k): Acc() for p in ("nearest", "brightest") for k in POLICY_K}
@@ -868,13 +894,8 @@ def metrics_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames: 
     cand_mismatch = 0
     pairs_total = 0
     measured = 0
-    for i in tqdm(range(frames), desc=desc, unit="frame", file=sys.stderr, leave=False):
-        todo = changes(scene, motion, i)
-        for s in [mirror, *scheds.values()]:
-            apply_changes(s, todo)
+    for points, normals, cams in lockstep(scene, motion, mirror, scheds, frames, seed, desc):
         lights, objects = mirror.lights, mirror.objects
-        points, normals = face_samples(objects.bounds_min, objects.bounds_max, seed=seed)
-        cams = camera_at(scene.cameras, i)
         out = {}
         for key, s in scheds.items():
             out[key] = s.frame(cams, dt=DT)
@@ -1143,15 +1164,9 @@ def residual_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames:
     """Steps every run's fast Scheduler in lockstep over the animated sequence and measures
     the lighting error, abrupt pops and summed popping of each (``ResidualAcc``) on the
     visible objects of a fixed seeded subset of at most ``max_objects`` objects."""
-    mirror = SceneAPI()
-    mirror.set_lights(**scene.lights)
-    mirror.set_objects(**scene.objects)
+    mirror = scene_mirror(scene)
     n = len(mirror.objects)
-    subset = np.zeros(n, bool)
-    if n <= max_objects:
-        subset[:] = True
-    else:
-        subset[np.random.default_rng(seed).choice(n, max_objects, replace=False)] = True
+    subset = measured_subset(n, max_objects, seed)
     scheds = {key: new_scheduler(lightsched.Scheduler, r, scene) for key, r in runs.items()}
     accs = {key: ResidualAcc(r.make_config().residual, r.make_config().max_lights)
             for key, r in runs.items()}
@@ -1160,13 +1175,8 @@ def residual_pass(scene: CityScene, motion: str, runs: dict[tuple, Run], frames:
     prev_pairs: tuple[np.ndarray, np.ndarray] | None = None
     cand_mismatch = pairs_total = measured = 0
     sun_share = [0.0, 0.0]  # directional lighting in A, all of A
-    for i in tqdm(range(frames), desc=desc, unit="frame", file=sys.stderr, leave=False):
-        todo = changes(scene, motion, i)
-        for s in [mirror, *scheds.values()]:
-            apply_changes(s, todo)
+    for points, normals, cams in lockstep(scene, motion, mirror, scheds, frames, seed, desc):
         lights, objects = mirror.lights, mirror.objects
-        points, normals = face_samples(objects.bounds_min, objects.bounds_max, seed=seed)
-        cams = camera_at(scene.cameras, i)
         out = {key: s.frame(cams, dt=DT) for key, s in scheds.items()}
         f0 = next(iter(out.values()))
         rows = np.flatnonzero(np.asarray(f0.visible) & subset)

@@ -56,17 +56,35 @@ def orbit(cam: ls.Camera, t: int, moving: bool) -> ls.Camera:
                      aspect=cam.aspect, near=cam.near, far=cam.far, id=cam.id)
 
 
+class Movers:
+    """A Scheduler on ``scene`` (``s``) and the boxes it was given, some of which move."""
+
+    def __init__(self, scene: CityScene, config: ls.Config) -> None:
+        self.s = ls.Scheduler(config)
+        self.s.set_lights(**scene.lights)
+        self.s.set_objects(**scene.objects)
+        self.rng = np.random.default_rng(0)
+        self.lo = np.array(scene.objects["bounds_min"], np.float64)
+        self.hi = np.array(scene.objects["bounds_max"], np.float64)
+        self.ids = scene.objects["id"]
+
+    def move(self, n: int, step: float | None) -> None:
+        """Moves n objects chosen at random by ``step`` on each axis, or by a normal step
+        of 0.1 m (None)."""
+        rows = self.rng.choice(self.ids.size, n, replace=False)
+        d = self.rng.normal(0, 0.1, (n, 3)) if step is None else step
+        self.lo[rows] += d
+        self.hi[rows] += d
+        self.s.update_objects(id=self.ids[rows], bounds_min=self.lo[rows],
+                              bounds_max=self.hi[rows])
+
+
 def run(scene: CityScene, movers: float, lights_move: bool, budget: int, culling: str,
         moving: bool, frames: int, warmup: int) -> dict[str, float]:
-    cfg = ls.Config(shadow_budget=16, shadow_update_budget=budget, caster_culling=culling)
-    s = ls.Scheduler(cfg)
-    s.set_lights(**scene.lights)
-    s.set_objects(**scene.objects)
-    rng = np.random.default_rng(0)
-    lo = np.array(scene.objects["bounds_min"], np.float64)
-    hi = np.array(scene.objects["bounds_max"], np.float64)
-    ids = scene.objects["id"]
-    n_move = max(1, int(movers * ids.size))
+    mv = Movers(scene, ls.Config(shadow_budget=16, shadow_update_budget=budget,
+                                 caster_culling=culling))
+    s = mv.s
+    n_move = max(1, int(movers * mv.ids.size))
     local_type = scene.lights["type"]
     type_of = dict(zip(scene.lights["id"].tolist(), local_type.tolist(), strict=True))
     drawn = every = texels = texels_every = 0
@@ -75,11 +93,7 @@ def run(scene: CityScene, movers: float, lights_move: bool, budget: int, culling
     share, views_ms = [], []
     for t in range(warmup + frames):
         if t:
-            rows = rng.choice(ids.size, n_move, replace=False)
-            step = rng.normal(0, 0.1, (n_move, 3))
-            lo[rows] += step
-            hi[rows] += step
-            s.update_objects(id=ids[rows], bounds_min=lo[rows], bounds_max=hi[rows])
+            mv.move(n_move, None)
             if lights_move:
                 s.update_lights(id=scene.lights["id"], position=move_lights(scene.lights, t))
         t0 = time.perf_counter()
@@ -120,23 +134,15 @@ def cost(frames: int, moving: bool) -> None:
     sc = city(100_000, 10_000, seed=1, spot_fraction=0.3, shadow_fraction=0.05,
               sun_shadows=True)
     for culling in ("camera", "light"):
-        s = ls.Scheduler(ls.Config(shadow_budget=16, caster_culling=culling))
-        s.set_lights(**sc.lights)
-        s.set_objects(**sc.objects)
-        rng = np.random.default_rng(0)
-        lo = np.array(sc.objects["bounds_min"], np.float64)
-        hi = np.array(sc.objects["bounds_max"], np.float64)
-        ids = sc.objects["id"]
+        mv = Movers(sc, ls.Config(shadow_budget=16, caster_culling=culling))
+        s = mv.s
         rows_ms: dict[str, list[float]] = {"shadows": [], "casters": [], "views": [],
                                            "total": []}
         for t in range(frames + 3):
             if moving:
                 s.update_lights(id=sc.lights["id"], position=move_lights(sc.lights, t + 1))
             else:
-                rows = rng.choice(ids.size, 100, replace=False)
-                lo[rows] += 0.05
-                hi[rows] += 0.05
-                s.update_objects(id=ids[rows], bounds_min=lo[rows], bounds_max=hi[rows])
+                mv.move(100, 0.05)
             f = s.frame(sc.cameras)
             if t >= 3:
                 for k in rows_ms:
