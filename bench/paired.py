@@ -4,6 +4,7 @@
     python bench/paired.py --base fdf791a --sizes 1M:100k --scenarios all --frames 10
     python bench/paired.py --base 41b6ba6 --new 8008441 --first base    # two commits
     python bench/paired.py --base 41b6ba6 --sizes 10k:1k --isolate 8     # a process a side
+    python bench/paired.py --base 41b6ba6 --no-shadows --config residual=false  # like for like
 
 The base commit's ``lightsched/`` is extracted (``git archive``, as bench/history.py does)
 and the working tree's copied, and both are imported under other names
@@ -105,15 +106,34 @@ def new_side(commit: str | None, workdir: Path, copy: bool) -> Path:
     return extract(resolve(commit), workdir / "new")
 
 
+def side_config(pkg: Any, config: dict[str, Any]) -> Any:
+    """The side's Config: K = 8 and the fields of ``config`` its Config has (a base from
+    before a field was added runs without it)."""
+    fields = dataclasses.fields(pkg.Config)
+    return pkg.Config(max_lights=8, **{k: v for k, v in config.items()
+                                       if any(f.name == k for f in fields)})
+
+
+def parse_config(items: list[str]) -> dict[str, Any]:
+    """--config NAME=VALUE items as Config fields (VALUE read as JSON: false, 0.5, "x")."""
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        out[name] = json.loads(value)
+    return out
+
+
 def run_frames(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int,
-               warmup: int, seed: int, object_ids: str = "random"
+               warmup: int, seed: int, object_ids: str = "random", shadows: bool = True,
+               config: dict[str, Any] | None = None
                ) -> dict[str, tuple[list[float], list[dict[str, float]]]]:
     """Each side's Scheduler on the same scene and motion, their frames alternated (A B,
-    then B A, ...); per side the timed frames' seconds and stage seconds."""
-    scene = make_scene(n, l, seed, True, object_ids=object_ids)
+    then B A, ...); per side the timed frames' seconds and stage seconds. ``shadows``:
+    the city's shadowed lights (False: none); ``config``: Config fields (side_config)."""
+    scene = make_scene(n, l, seed, shadows, object_ids=object_ids)
     sides = {}
     for side, pkg in packages.items():
-        s = pkg.Scheduler(pkg.Config(max_lights=8))
+        s = pkg.Scheduler(side_config(pkg, config or {}))
         s.set_lights(**scene.lights)
         s.set_objects(**scene.objects)
         sides[side] = (s, Motion(scenario, scene, seed))
@@ -152,10 +172,11 @@ def summary(new: list[float], base: list[float], stages: dict[str, dict[str, flo
             "stages": stages}
 
 
-def paired(packages: dict[str, Any], n: int, l: int, scenario: str, frames: int, warmup: int,
-           seed: int, object_ids: str = "random") -> dict[str, Any]:
+def paired(packages: dict[str, Any], n: int, l: int, scenario: str,
+           args: argparse.Namespace) -> dict[str, Any]:
     """Both sides in this process, frame by frame."""
-    out = run_frames(packages, n, l, scenario, frames, warmup, seed, object_ids)
+    out = run_frames(packages, n, l, scenario, args.frames, args.warmup, args.seed,
+                     args.object_ids, not args.no_shadows, parse_config(args.config))
     return summary(out["new"][0], out["base"][0],
                    {side: stage_medians(st) for side, (_, st) in out.items()},
                    n=n, l=l, scenario=scenario)
@@ -219,6 +240,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="run each side alone in a process of its own, ROUNDS times per "
                         "size and scenario, the sides alternating; the kernels load from "
                         "numba's cache (implies --cached both)")
+    p.add_argument("--no-shadows", action="store_true",
+                   help="the city without shadowed lights (default: 1%% of the point and spot "
+                        "lights and the sun shadowed)")
+    p.add_argument("--config", action="append", default=[], metavar="NAME=VALUE",
+                   help="a Config field for both sides, VALUE as JSON (residual=false); a "
+                        "side whose Config has no such field runs without it")
     p.add_argument("--prime", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--child", choices=["new", "base"], help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -246,8 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         packages = {side: load_package(paths[side], "lightsched_" + side, fresh=not cached[side])
                     for side in order}
         return report(args, base, lambda n, l, scenario: paired(
-            packages, n, l, scenario, args.frames, args.warmup, args.seed, args.object_ids),
-            packages)
+            packages, n, l, scenario, args), packages)
 
 
 def side_package(args: argparse.Namespace, base: dict[str, str], workdir: Path, fresh: bool
@@ -268,7 +294,7 @@ def prime(args: argparse.Namespace, base: dict[str, str], workdir: Path) -> int:
     for n, l in parse_sizes(args.sizes):
         for scenario in parse_scenarios(args.scenarios):
             run_frames({args.child: pkg}, n, l, scenario, 3, args.warmup, args.seed,
-                       args.object_ids)
+                       args.object_ids, not args.no_shadows, parse_config(args.config))
     if importlib.util.find_spec(pkg.__name__ + ".warmup") is not None:
         importlib.import_module(pkg.__name__ + ".warmup").warm_up()
     return 0
@@ -281,7 +307,8 @@ def child(args: argparse.Namespace, base: dict[str, str], workdir: Path) -> int:
     (n, l), = parse_sizes(args.sizes)
     (scenario,) = parse_scenarios(args.scenarios)
     times, stages = run_frames({args.child: pkg}, n, l, scenario, args.frames, args.warmup,
-                               args.seed, args.object_ids)[args.child]
+                               args.seed, args.object_ids, not args.no_shadows,
+                               parse_config(args.config))[args.child]
     print(json.dumps({"frame_ms": float(np.median(times)) * 1e3,
                       "stages": stage_medians(stages)}))
     return 0
@@ -297,7 +324,9 @@ def report(args: argparse.Namespace, base: dict[str, str],
            if args.isolate else f"both sides in one process, first side: {args.first}")
     say(f"{m['cpu']}, {m['nproc']} CPUs ({m['numba_threads']} numba threads); new side "
         f"{new} against base {base['sha'][:7]} ({base['subject'][:60]}...); object "
-        f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}; {how}")
+        f"ids {args.object_ids}; kernels loaded from numba's cache: {args.cached}; {how}; "
+        f"shadowed lights: {'none' if args.no_shadows else 'yes'}; Config fields: "
+        f"{', '.join(args.config) or 'none'} (K = 8)")
     say("| N | L | scenario | base ms | working tree ms | difference ms (quartiles) "
         "| mean difference ms | stages that moved most (base -> working tree, ms) |")
     say("|---|---|---|---|---|---|---|---|")

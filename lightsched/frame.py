@@ -16,7 +16,7 @@ import numba as nb
 import numpy as np
 
 from .fields import FIELDS, FIELDS_BY_NAME, PER_OBJECT_NAMES, axis_size
-from .jit import PRANGE_ONLY
+from .jit import OBJECT_CHUNK, PRANGE_ONLY
 
 # name -> dtype, DESIGN section 3's order (fields.FIELDS).
 FRAME_ARRAYS: dict[str, Any] = {f.name: f.dtype for f in FIELDS}
@@ -160,15 +160,38 @@ def row_words(a: np.ndarray) -> np.ndarray:
     return rows.view(np.uint8)
 
 
-@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def copy_rows(src, dst, rows):
-    """dst[r] = src[r] for the rows ``rows`` (int64) of two [N, W] arrays (parallel): an
-    incremental frame's per-object outputs (DESIGN section 3) keep last frame's rows where
-    it does not write them (DESIGN section 6)."""
-    for i in nb.prange(rows.shape[0]):
+def byte_rows(a: np.ndarray) -> np.ndarray:
+    """An [N, ...] C-contiguous array's rows as bytes, [N, row bytes] (N > 0), so that
+    arrays of every dtype go to copy_rows in one tuple."""
+    return a.reshape(a.shape[0], -1).view(np.uint8)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _copy_rows_range(src, dst, rows, lo, hi):
+    for i in range(lo, hi):
         r = rows[i]
-        for w in range(src.shape[1]):
-            dst[r, w] = src[r, w]
+        for a in range(len(src)):
+            s, d = src[a], dst[a]
+            for w in range(s.shape[1]):
+                d[r, w] = s[r, w]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def copy_rows(src, dst, rows):
+    """dst[a][r] = src[a][r] for the rows ``rows`` (int64) of each pair of [N, W] byte
+    arrays (byte_rows) of the tuples ``src`` and ``dst``: an incremental frame's
+    per-object outputs (DESIGN section 3) keep last frame's rows where it does not write
+    them (DESIGN section 6). On the calling thread: a parallel launch costs more than a
+    few hundred rows (copy_rows_parallel for more)."""
+    _copy_rows_range(src, dst, rows, 0, rows.shape[0])
+
+
+@nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
+def copy_rows_parallel(src, dst, rows):
+    """copy_rows with the rows split between the threads, OBJECT_CHUNK rows a work item."""
+    n = rows.shape[0]
+    for ch in nb.prange((n + OBJECT_CHUNK - 1) // OBJECT_CHUNK):
+        _copy_rows_range(src, dst, rows, ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -14,7 +14,15 @@ import numpy as np
 
 from .buffers import Buffers, SpareOutputs, read_only_view
 from .fade import fade_object, held_slots, steady_slots
-from .frame import PER_OBJECT, copy_rows, field_shape, held_elsewhere, rows_not_in
+from .frame import (
+    PER_OBJECT,
+    byte_rows,
+    copy_rows,
+    copy_rows_parallel,
+    field_shape,
+    held_elsewhere,
+    rows_not_in,
+)
 from .jit import OBJECT_CHUNK, PRANGE_ONLY
 from .priority import residual_term
 from .scene import ON
@@ -52,6 +60,7 @@ if TYPE_CHECKING:
     from .scene import Config, LightStore, ObjectStore
     from .scheduler import FrameState
     from .shadows import ShadowSet
+    from .tuning import Tuning
 
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 SORT_FEW = 16                # residual_gather sorts more lights than this with numpy's sort
@@ -436,7 +445,7 @@ class Outputs:
 def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                     packed: Packed, shadows: ShadowSet, visible: np.ndarray,
                     lights: LightStore, objects: ObjectStore, renumbered: bool, config: Config,
-                    dt: float, buffers: Buffers) -> Outputs:
+                    dt: float, tuning: Tuning, buffers: Buffers) -> Outputs:
     """The objects stage: top-K with hysteresis, fade and slot_shadow (object_pass) on the
     rows the pair cache stage gives (every row in a full frame); the other rows are last
     frame's. A full frame leaves out the objects out of view in it and the two frames
@@ -445,7 +454,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
     n, k = len(objects), config.max_lights
     run, how = cache.run, ""
     if plan.full:
-        out, out_vis = _outputs(last, None, n, k, buffers)
+        out, out_vis = _outputs(last, None, n, k, tuning, buffers)
         fading = np.empty(n, np.bool_)
         if out_vis is not None and last is not None and not renumbered:
             run = run_rows((visible, last.visibility.objects, out_vis), buffers)
@@ -454,7 +463,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                 how = (f"; {n - run.size} objects out of view keep their empty rows (and in "
                        "the two frames before)")
     elif run.size:
-        out = _outputs(last, run, n, k, buffers)[0]
+        out = _outputs(last, run, n, k, tuning, buffers)[0]
         fading = last.outputs.fading.copy()
     else:
         out = {name: getattr(last.frame, name) for name in WRITTEN}
@@ -492,7 +501,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
 
 
 def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int,
-             buffers: Buffers) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+             tuning: Tuning, buffers: Buffers) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """Arrays for this frame's per-object outputs (WRITTEN): every row is written when
     ``written`` is None (a full frame), else only those rows are, the others must be the
     last frame's. The arrays of the frame before the last are taken back when nothing
@@ -512,12 +521,16 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
                 # Rows this frame writes need no copy: with the same lights moving frame
                 # after frame, that is nearly all of the lag.
                 lag = rows_not_in(lag, written)
-            for name, arr in spare.arrays.items():
-                src = getattr(last.frame, name)
-                if lag is None:
-                    np.copyto(arr, src)
-                else:
-                    copy_rows(src.reshape(n, -1), arr.reshape(n, -1), lag)
+            if lag is None:
+                for name, arr in spare.arrays.items():
+                    np.copyto(arr, getattr(last.frame, name))
+            elif lag.size:
+                src = tuple(byte_rows(getattr(last.frame, name)) for name in spare.arrays)
+                dst = tuple(byte_rows(arr) for arr in spare.arrays.values())
+                row_bytes = sum(a.shape[1] for a in dst)
+                copy = (copy_rows_parallel if lag.size * row_bytes > tuning.parallel_copy_bytes
+                        else copy_rows)
+                copy(src, dst, lag)
             return spare.arrays, None
         return spare.arrays, spare.visible if spare.visible.shape == (n,) else None
     if written is None:

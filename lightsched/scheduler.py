@@ -151,7 +151,7 @@ class Scheduler(SceneAPI):
                                                      grid, changes.light_rows, tuning, buffers))
         outputs = clock.lap("objects", select_and_fade(
             plan, last, cache, packed, shadows, vis.objects, lights, objects,
-            changes.object_rows is None, cfg, dt, buffers))
+            changes.object_rows is None, cfg, dt, tuning, buffers))
         frame = self._output(last, cams, vis, shadows, casters, views, outputs)
         self._views = views
         self._explained = ExplainRecord(

@@ -61,3 +61,7 @@ class Tuning:
     # The lists are made again from scratch when more than this share of the lights left
     # their widened spheres.
     rebuild_share: float = 0.5
+    # An incremental frame copies the rows of last frame's outputs it does not write on
+    # the calling thread up to this many bytes, on every thread beyond: waking the other
+    # thread costs several microseconds, a few hundred rows' copy.
+    parallel_copy_bytes: int = 1 << 16

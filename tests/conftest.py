@@ -43,14 +43,15 @@ register_profile()
 # The Tuning that forces each kind of grid of the fast path (grid.py): every object in it
 # (an invisible object's record masked: simd.SHOWN), or only the visible objects (and a
 # second grid of the invisible casters near shadowed point and spot lights); and with each,
-# one of the two ways of each choice below.
+# one of the two ways of each choice below (and of copying the output rows an incremental
+# frame keeps: on every thread or on the calling one).
 TUNINGS = {
     "every": Tuning(every_object_share=0.0, candidate_min_objects=0,
                     direct_tests_per_light=1e18, grid_tests_per_object=1e18,
-                    near_scan_pairs=0, few_pairs=math.inf),
+                    near_scan_pairs=0, few_pairs=math.inf, parallel_copy_bytes=0),
     "visible": Tuning(every_object_share=math.inf, candidate_min_objects=0,
                       direct_tests_per_light=-1e18, grid_tests_per_object=-1e18,
-                      near_scan_pairs=0, few_pairs=-1),
+                      near_scan_pairs=0, few_pairs=-1, parallel_copy_bytes=1 << 62),
 }
 
 
