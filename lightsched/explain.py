@@ -94,15 +94,17 @@ def object_row(ids: np.ndarray, object_id: Any) -> int:
 
 
 class ExplainRecord(NamedTuple):
-    """What the fast Scheduler keeps of its last frame for explain (references, except
-    ``prev_selected``, which the object pass overwrites in place).
+    """What the fast Scheduler keeps of its last frame for explain: references, and the
+    selection the object pass overwrote (explain is for people, so the frame loop keeps
+    no more than the rows it rewrites).
 
     lights, objects: the stores that frame read; frame: its outputs; config; live: per
     light row whether it could light an object (visible and not skipped, ShadowSet.live);
     light_visible: per light row; seg, heap: the pair cache (PairCache); selected: per
-    object row the lights selected this frame ([N, K], -1 padded); prev_selected: the same
-    before the frame; held: the slots' lights when the frame began; was_visible, is_new:
-    per object row, when the frame began."""
+    object row the lights selected this frame ([N, K], -1 padded); run: the rows the
+    object pass ran on (ascending) and selected_before: their ``selected`` rows before it
+    (the other rows did not change); held: the slots' lights when the frame began;
+    was_visible, is_new: per object row, when the frame began."""
 
     frame_index: int
     config: Config
@@ -114,7 +116,8 @@ class ExplainRecord(NamedTuple):
     seg: np.ndarray
     heap: PairHeap
     selected: np.ndarray
-    prev_selected: np.ndarray
+    run: np.ndarray
+    selected_before: np.ndarray
     held: np.ndarray
     was_visible: np.ndarray
     is_new: np.ndarray
@@ -132,7 +135,10 @@ def explain_record(rec: ExplainRecord, object_id: Any) -> Explanation:
     held = {int(x) for x in rec.held[row] if x >= 0}
     selected = {int(x) for x in rec.selected[row] if x >= 0} if visible else set()
     earlier = bool(rec.was_visible[row]) and not bool(rec.is_new[row])
-    prev_selected = {int(x) for x in rec.prev_selected[row] if x >= 0} if earlier else set()
+    i = int(np.searchsorted(rec.run, row))
+    before = (rec.selected_before[i] if i < rec.run.size and rec.run[i] == row
+              else rec.selected[row])
+    prev_selected = {int(x) for x in before if x >= 0} if earlier else set()
     competing: dict[int, float] = {}
     if visible:
         start, length = (int(x) for x in rec.seg[row])

@@ -439,6 +439,8 @@ class Outputs:
     arrays: dict[str, np.ndarray]
     fading: np.ndarray
     run: np.ndarray
+    # ``selected`` at the rows ``run`` before the pass overwrote them (for explain).
+    selected_before: np.ndarray
     how: str = ""
 
 
@@ -474,6 +476,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
             {name: getattr(last.frame, name) for name in WRITTEN},
             None if plan.full else run, last.visibility.objects)
     out["visible"] = visible
+    selected_before = objects.get("selected")[run]
     if run.size:
         reset = objects.is_new | ~objects.get("was_visible")
         if plan.reset_all:
@@ -497,7 +500,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])
     objects.put("was_visible", visible)
-    return Outputs(out, fading, run, how)
+    return Outputs(out, fading, run, selected_before, how)
 
 
 def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int,

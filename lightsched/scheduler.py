@@ -124,7 +124,9 @@ class Scheduler(SceneAPI):
                           quiet=_quiet(last, objects))
         if plan.kind == UNCHANGED:
             return self._repeat(last, plan, clock, prior)
-        began = self._began(prior)
+        # explain's view of the object rows as the frame begins (replaced whole, never
+        # written in place): the slots' lights, was_visible and is_new.
+        began = objects.get("slot_light"), objects.get("was_visible"), objects.is_new
         # The last record holds the outputs of the frame before the last, which the objects
         # stage takes back when nothing else holds them.
         del prior
@@ -156,7 +158,7 @@ class Scheduler(SceneAPI):
         self._views = views
         self._explained = ExplainRecord(
             self.frame_index, cfg, *self.snapshot(), frame, shadows.live, vis.lights, cache.seg,
-            cache.heap, objects.get("selected"), *began)
+            cache.heap, objects.get("selected"), outputs.run, outputs.selected_before, *began)
         self._last = FrameState(changes, cams, vis, packed, grid, pairs, shadows, casters, views,
                                 cache, outputs, frame)
         clock.lap("output", None)
@@ -169,18 +171,6 @@ class Scheduler(SceneAPI):
                                               cache, outputs, frame),
                        "seconds": clock.seconds()}
         return frame
-
-    def _began(self, prior: ExplainRecord | None) -> tuple[np.ndarray, ...]:
-        """explain's view of the object rows as the frame begins: last frame's selection
-        (copied, into the last record's copy: the object pass overwrites it in place), the
-        slots' lights, was_visible and is_new (replaced whole, never written in place)."""
-        objects = self.objects
-        selected = objects.get("selected")
-        copy = None if prior is None else prior.prev_selected
-        if copy is None or copy.shape != selected.shape or copy is prior.selected:
-            copy = np.empty_like(selected)
-        np.copyto(copy, selected)
-        return copy, objects.get("slot_light"), objects.get("was_visible"), objects.is_new
 
     def explain(self, object_id: Any) -> Explanation:
         """Why each light is (not) on object ``object_id`` in the last frame (DESIGN section
@@ -241,7 +231,7 @@ class Scheduler(SceneAPI):
         if prior is not None:
             objects = self.objects
             self._explained = prior._replace(
-                frame_index=self.frame_index, frame=frame, prev_selected=prior.selected,
+                frame_index=self.frame_index, frame=frame, run=prior.run[:0],
                 held=objects.get("slot_light"), was_visible=objects.get("was_visible"),
                 is_new=objects.is_new)
         plan_text = {stage: f"{text} (kept: nothing changed)"
