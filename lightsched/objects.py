@@ -191,7 +191,7 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
         pool_size = max(pool_size, seg[run[r], 1])
     cf = np.empty((CF_ROWS, pool_size))
     ci = np.empty((CI_ROWS, pool_size), np.int64)
-    batch = residual_batch(pool_size)
+    batch = residual_batch(pool_size, residual.on)
     in_batch = 0
     for r in range(first, end):
         o = run[r]
@@ -323,10 +323,12 @@ class ResidualBatch(NamedTuple):
 
 
 @nb.njit(cache=True, nogil=True)
-def residual_batch(pool_size):
-    """An empty ResidualBatch that holds at least one object of ``pool_size`` pairs."""
-    cap = max(pool_size, RESIDUAL_TERMS)
-    return ResidualBatch(np.empty(OBJECT_CHUNK, np.int64), np.zeros(OBJECT_CHUNK + 1, np.int64),
+def residual_batch(pool_size, on):
+    """An empty ResidualBatch that holds at least one object of ``pool_size`` pairs, or
+    with the residual off (``on`` False) none: a chunk then allocates nothing for it."""
+    cap = max(pool_size, RESIDUAL_TERMS) if on else 0
+    n = OBJECT_CHUNK if on else 0
+    return ResidualBatch(np.empty(n, np.int64), np.zeros(n + 1, np.int64),
                          np.empty(cap, np.int64), np.empty(cap))
 
 
