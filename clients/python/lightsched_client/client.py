@@ -414,8 +414,10 @@ async def aretrying(retry_seconds: float, call: Any, *args: Any) -> Any:
 
 def lost(e: BaseException) -> bool:
     """The session is gone from the service: its worker died (another now answers for its
-    id) or it idled past the TTL."""
-    return isinstance(e, RemoteError) and e.status == 404
+    id) or it idled past the TTL (404); or the session of its id is behind the client
+    (409 out-of-order: a worker taken for dead came back with the old copy)."""
+    return isinstance(e, RemoteError) and (e.status == 404 or (
+        e.status == 409 and str(e.problem.get("type", "")).endswith(":out-of-order")))
 
 
 class _Table:
@@ -561,14 +563,18 @@ class RemoteScheduler(_Session):
                 return self._received(self._send(doc), own)
             except Exception as e:
                 if lost(e) and not self.closed:
-                    info = retrying(self.client.retry_seconds, lambda: self.client.call(
-                        "PUT", self._put_path(), self._body))
-                    doc = self._rebuilt(doc, info)
+                    doc = self._rebuilt(doc, retrying(self.client.retry_seconds, self._remake))
                 elif not transient(e):
                     raise
                 self._drop_stream()
                 last = e
         raise last
+
+    def _remake(self) -> dict[str, Any]:
+        """The session made again, empty (a stale copy of it dropped first)."""
+        with contextlib.suppress(RemoteError):
+            self.client.call("DELETE", self._put_path())
+        return self.client.call("PUT", self._put_path(), self._body)
 
     def _send(self, doc: dict[str, Any]) -> Any:
         if self.stream:
@@ -679,14 +685,19 @@ class AsyncRemoteScheduler(_Session):
                     return self._received(await self._send(doc), own)
                 except Exception as e:
                     if lost(e) and not self.closed:
-                        doc = self._rebuilt(doc, await aretrying(
-                            self.client.retry_seconds, self.client.call, "PUT",
-                            self._put_path(), self._body))
+                        doc = self._rebuilt(doc, await aretrying(self.client.retry_seconds,
+                                                                 self._remake))
                     elif not transient(e):
                         raise
                     self._ws = None
                     last = e
             raise last
+
+    async def _remake(self) -> dict[str, Any]:
+        """RemoteScheduler._remake."""
+        with contextlib.suppress(RemoteError):
+            await self.client.call("DELETE", self._put_path())
+        return await self.client.call("PUT", self._put_path(), self._body)
 
     async def _send(self, doc: dict[str, Any]) -> Any:
         if self.stream:
