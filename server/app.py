@@ -278,7 +278,10 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
 
     @app.get("/healthz", tags=["service"])
     async def healthz(request: Request) -> Response:
-        """Liveness: 200 while the service answers."""
+        """Liveness: 200 while the service answers. It sweeps idle sessions first (the
+        count is of live ones), so that a worker no client calls still frees them: its load
+        balancer's health checks come every second or so."""
+        service.evict_idle()
         return reply(request, {"status": "ok", "sessions": len(service.sessions)})
 
     @app.get("/metrics", tags=["service"])
