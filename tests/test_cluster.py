@@ -6,12 +6,16 @@ and LiveServer for the single-worker rules."""
 from __future__ import annotations
 
 import http.client
+import os
+import subprocess
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import numpy as np
 import pytest
+import yaml
 from lightsched_client import Client
 from lightsched_client.client import camera_doc
 from lightsched_client.wire import MSGPACK, dumps
@@ -25,6 +29,7 @@ from lightsched.scenes import city, city_sequence
 SCENE = city(300, 30, seed=5, shadow_fraction=0.2)
 CONFIG = ls.Config(max_lights=4, shadow_budget=2)
 MP = {"Content-Type": MSGPACK, "Accept": MSGPACK}
+DEPLOY = Path(__file__).resolve().parent.parent / "deploy"
 
 
 @pytest.fixture(scope="module")
@@ -244,3 +249,25 @@ def test_cluster_routes_every_request_of_a_session_to_one_worker():
         conn.request("POST", "/v1/sessions", body=b"", headers={"Accept": "application/json"})
         assert conn.getresponse().status == 405
         conn.close()
+
+
+def test_deploy_files_hold_together():
+    """HAProxy takes deploy/haproxy.cfg with the addresses docker-compose.yml and k8s.yaml
+    give it, and those name the workers they define."""
+    compose = yaml.safe_load((DEPLOY / "docker-compose.yml").read_text())
+    env = compose["services"]["haproxy"]["environment"]
+    workers = {k for k in compose["services"] if k.startswith("worker")}
+    assert {v.split(":")[0] for k, v in env.items() if k.startswith("LIGHTSCHED_W")} == workers
+    docs = list(yaml.safe_load_all((DEPLOY / "k8s.yaml").read_text()))
+    kinds = {d["kind"]: d for d in docs}
+    replicas = kinds["StatefulSet"]["spec"]["replicas"]
+    lb_env = {e["name"]: e["value"] for e in kinds["Deployment"]["spec"]["template"]["spec"]
+              ["containers"][0]["env"]}
+    assert sorted(v for k, v in lb_env.items() if k.startswith("LIGHTSCHED_W")) == [
+        f"lightsched-{i}.lightsched-workers:8080" for i in range(replicas)]
+    for given in ({}, env, lb_env):
+        # Names that do not resolve here are allowed (init-addr none): the check still
+        # parses every line.
+        out = subprocess.run(["haproxy", "-c", "-f", str(DEPLOY / "haproxy.cfg")],
+                             env={**os.environ, **given}, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
