@@ -81,6 +81,13 @@ class Script:
         self.sched = ls.Scheduler(config)
         self.config = config
 
+    def start(self, config: ls.Config, scene: Any, changed_only: bool = False) -> None:
+        """A session with the scene set and its first frame."""
+        self.session(config)
+        self.change("set_lights", **scene.lights)
+        self.change("set_objects", **scene.objects)
+        self.frame(scene.cameras, changed_only=changed_only)
+
     def lose(self) -> None:
         """The session is lost (the runner deletes it): the next frame rebuilds it."""
         self.steps.append({"call": "lose"})
@@ -191,10 +198,7 @@ def lifecycle() -> Script:
     s = Script("lifecycle", "A session through every scene call: set, frames with moving "
                             "lights (full and changed_only), object updates and removals, "
                             "light removal, a second camera, a cut, info and close.")
-    s.session(ls.Config(max_lights=4, shadow_budget=3, fade_in=0.1, fade_out=0.1))
-    s.change("set_lights", **sc.lights)
-    s.change("set_objects", **sc.objects)
-    s.frame(sc.cameras)
+    s.start(ls.Config(max_lights=4, shadow_budget=3, fade_in=0.1, fade_out=0.1), sc)
     for i in range(1, 4):
         s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, i))
         s.frame(sc.cameras, dt=0.05, changed_only=i > 1)
@@ -225,10 +229,7 @@ def refusals() -> Script:
     sc = city(30, 8, seed=6, shadow_fraction=0.3)
     s = Script("refusals", "Bad calls and their problem documents; each leaves the session "
                            "as it was, as the frames after them show.")
-    s.session(ls.Config(max_lights=3))
-    s.change("set_lights", **sc.lights)
-    s.change("set_objects", **sc.objects)
-    s.frame(sc.cameras, changed_only=True)  # a session's first frame: answered in full
+    s.start(ls.Config(max_lights=3), sc, changed_only=True)  # a first frame: answered in full
     bad = {k: np.array(v, copy=True) for k, v in sc.lights.items()}
     bad["radius"][2] = -1.0
     s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, 1))
@@ -269,10 +270,7 @@ def recovery() -> Script:
     s = Script("recovery", "A session lost twice (its worker died): the client rebuilds it "
                            "from its mirror of the scene (sets, updates and removals, some "
                            "refused) and the frame it was sending goes on as a cut.")
-    s.session(ls.Config(max_lights=3, shadow_budget=2, fade_in=0.1, fade_out=0.1))
-    s.change("set_lights", **sc.lights)
-    s.change("set_objects", **sc.objects)
-    s.frame(sc.cameras)
+    s.start(ls.Config(max_lights=3, shadow_budget=2, fade_in=0.1, fade_out=0.1), sc)
     ids = sc.objects["id"]
     for i in range(1, 3):
         s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, i))
