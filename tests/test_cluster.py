@@ -5,8 +5,11 @@ and LiveServer for the single-worker rules."""
 
 from __future__ import annotations
 
+import asyncio
 import http.client
 import os
+import socket
+import struct
 import subprocess
 import threading
 import time
@@ -16,7 +19,7 @@ import msgpack
 import numpy as np
 import pytest
 import yaml
-from lightsched_client import Client
+from lightsched_client import AsyncClient, Client
 from lightsched_client.client import camera_doc
 from lightsched_client.wire import MSGPACK, dumps
 from lightsched_server.cluster import Cluster, haproxy_config
@@ -271,3 +274,116 @@ def test_deploy_files_hold_together():
         out = subprocess.run(["haproxy", "-c", "-f", str(DEPLOY / "haproxy.cfg")],
                              env={**os.environ, **given}, capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
+
+
+class ResettingProxy:
+    """A TCP proxy to a server that, once armed, lets the next frame request through and
+    then resets the client's connection as the answer comes back: the frame ran, and the
+    client never hears of it (what a dying worker or a broken network does)."""
+
+    def __init__(self, port):
+        self.upstream = port
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.armed = False
+        self.resets = 0
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self):
+        while True:
+            try:
+                client, _ = self.sock.accept()
+            except OSError:
+                return
+            server = socket.create_connection(("127.0.0.1", self.upstream))
+            state = {"victim": False}
+            threading.Thread(target=self._up, args=(client, server, state), daemon=True).start()
+            threading.Thread(target=self._down, args=(server, client, state), daemon=True).start()
+
+    def _up(self, client, server, state):
+        while data := _recv(client):
+            if self.armed and b"/frames" in data:
+                self.armed, state["victim"] = False, True
+            server.sendall(data)
+        server.close()
+
+    def _down(self, server, client, state):
+        while data := _recv(server):
+            if state["victim"]:
+                self.resets += 1
+                client.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                # Wakes the other thread's recv first: a socket closed while another
+                # thread reads it is not closed until that read returns.
+                client.shutdown(socket.SHUT_RD)
+                client.close()  # RST: the answer is lost
+                server.close()
+                return
+            client.sendall(data)
+        client.close()
+
+    def close(self):
+        self.sock.close()
+
+
+def _recv(sock):
+    try:
+        return sock.recv(1 << 16)
+    except OSError:
+        return b""
+
+
+def test_a_frame_whose_answer_is_lost_is_sent_again_and_runs_once(server):
+    proxy = ResettingProxy(server.port)
+    try:
+        with Client(proxy.url) as c:
+            s, twin = c.session(CONFIG), ls.Scheduler(CONFIG)
+            for target in (s, twin):
+                target.set_lights(**SCENE.lights)
+                target.set_objects(**SCENE.objects)
+            assert_same_frame(s.frame(SCENE.cameras), twin.frame(SCENE.cameras), "frame 0")
+            for i, upd in city_sequence(SCENE, 4):
+                if not upd:
+                    continue
+                for target in (s, twin):
+                    target.update_lights(**{k: v[:20] for k, v in upd.items()})
+                    target.remove_lights(id=SCENE.lights["id"][-i:][:1])  # twice: a 422
+                proxy.armed = True
+                assert_same_frame(s.frame(SCENE.cameras), twin.frame(SCENE.cameras), f"frame {i}")
+            assert proxy.resets == 3 and s.recoveries == 0
+            assert s.info()["frame_index"] == twin.frame_index == 4  # each ran once
+            # A POST without seq is not sent again: the caller hears of the reset.
+            proxy.armed = True
+            with pytest.raises(ConnectionError):
+                c.call("POST", f"/v1/sessions/{s.id}/frames", frame_doc())
+            assert proxy.resets == 4 and s.info()["frame_index"] == 5  # it ran, once
+    finally:
+        proxy.close()
+
+
+def test_async_client_rebuilds_a_lost_session(server):
+    async def run():
+        async with AsyncClient(server.url) as c:
+            s, twin = await c.session(CONFIG), ls.Scheduler(CONFIG)
+            for target in (s, twin):
+                target.set_lights(**SCENE.lights)
+                target.set_objects(**SCENE.objects)
+            assert_same_frame(await s.frame(SCENE.cameras), twin.frame(SCENE.cameras))
+            await c.call("DELETE", f"/v1/sessions/{s.id}")  # as a dead worker loses it
+            moved = {"id": SCENE.lights["id"][:3], "position": SCENE.lights["position"][:3] + 1}
+            s.update_lights(**moved)
+            twin.update_lights(**moved)
+            fresh = ls.Scheduler(CONFIG)
+            fresh.set_lights(**{**SCENE.lights, "position": twin_positions(moved)})
+            fresh.set_objects(**SCENE.objects)
+            f = await s.frame(SCENE.cameras)
+            assert s.recoveries == 1 and f.frame_index == 0
+            assert_same_frame(f, fresh.frame(SCENE.cameras, cut=True), "rebuilt")
+            assert_same_frame(await s.frame(SCENE.cameras), fresh.frame(SCENE.cameras), "after")
+
+    def twin_positions(moved):
+        pos = SCENE.lights["position"].copy()
+        row = {int(x): r for r, x in enumerate(SCENE.lights["id"])}
+        pos[[row[int(x)] for x in moved["id"]]] = moved["position"]
+        return pos
+
+    asyncio.run(run())
