@@ -114,6 +114,7 @@ def worker():
         yield c
 
 
+@pytest.mark.slow  # ~2.5 minutes on 2 cores: in `make test`, not test-quick
 def test_fuzzed_requests_never_get_a_5xx_and_leave_sessions_intact(worker):
     url = worker.worker_url(0)
     schema = schemathesis.openapi.from_url(url + "/openapi.json")
@@ -181,6 +182,7 @@ def test_fuzzed_requests_never_get_a_5xx_and_leave_sessions_intact(worker):
     assert requests.get(url + "/healthz", timeout=5).status_code == 200
 
 
+@pytest.mark.slow  # ~25 s, most of it the TTL running out
 def test_a_thousand_sessions_fit_their_limits_and_the_ttl_frees_them():
     n, ttl = 1000, 12.0  # the TTL outlasts making them (~5 s here)
     small = city(40, 6, seed=2)
