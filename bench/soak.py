@@ -9,8 +9,8 @@ The server is bench/load.py's (``python -m lightsched serve``; with ``--workers 
 front of N of them), and so are the clients (load.Game: a session each, every light moving
 every frame, on an absolute 60 fps schedule, in one asyncio client process). Each minute
 is measured on its own: latency percentiles, missed deadlines, and the server's RSS sampled
-every 5 s. The first minute is warm-up (numba's first frames, allocator pools); RSS growth
-is the last minute's mean over the second's.
+every 5 s (its mean, and the spread of the samples). The first minute is warm-up (numba's
+first frames, allocator pools); RSS growth is the last minute's mean over the second's.
 """
 
 from __future__ import annotations
@@ -49,13 +49,15 @@ async def soak(port: int, args: argparse.Namespace, rows: list[dict[str, Any]],
             row = {"minute": minute + 1, "frames": int(sum(r.answered for r in results)),
                    "missed": 100.0 * missed / max(slots, 1),
                    "rss": float(np.mean(rss[-1])) if rss[-1] else float("nan"),
+                   "rss_spread": float(np.ptp(rss[-1])) if rss[-1] else float("nan"),
                    **{f"p{q}": float(np.percentile(lat, q)) if len(lat) else float("nan")
                       for q in (50, 95, 99)},
                    "max": float(np.max(lat)) if len(lat) else float("nan")}
             rows.append(row)
             say(f"minute {row['minute']:2d}: {row['frames']} frames, p50 {row['p50']:.2f} ms, "
                 f"p95 {row['p95']:.2f}, p99 {row['p99']:.2f}, max {row['max']:.1f}, missed "
-                f"{row['missed']:.2f}%, server RSS {row['rss'] / 2**20:.1f} MiB"
+                f"{row['missed']:.2f}%, server RSS {row['rss'] / 2**20:.1f} MiB (samples "
+                f"{len(rss[-1])}, spread {row['rss_spread'] / 2**10:.0f} KiB)"
                 + (f"; errors: {errors[:2]}" if errors else ""))
     finally:
         await asyncio.gather(*(g.close() for g in games), return_exceptions=True)
@@ -77,12 +79,13 @@ def render(rows: list[dict[str, Any]], growth: float, args: argparse.Namespace,
              f"at 60 fps, every light moving every frame, for {args.minutes} minutes. Server "
              f"RSS growth after the first minute (warm-up): **{growth:+.2f}%** (limit "
              f"{GROWTH_OK:g}%).", "",
-             "| minute | frames | p50 ms | p95 ms | p99 ms | max ms | missed % | server RSS MiB |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| minute | frames | p50 ms | p95 ms | p99 ms | max ms | missed % | server RSS MiB "
+             "| RSS spread KiB |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['minute']} | {r['frames']} | {r['p50']:.2f} | {r['p95']:.2f} | "
                      f"{r['p99']:.2f} | {r['max']:.1f} | {r['missed']:.2f} | "
-                     f"{r['rss'] / 2**20:.1f} |")
+                     f"{r['rss'] / 2**20:.1f} | {r['rss_spread'] / 2**10:.0f} |")
     return "\n".join(lines) + "\n"
 
 
