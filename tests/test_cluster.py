@@ -35,6 +35,21 @@ MP = {"Content-Type": MSGPACK, "Accept": MSGPACK}
 DEPLOY = Path(__file__).resolve().parent.parent / "deploy"
 
 
+def compile_for(config, scene):
+    """The kernels a scene runs, compiled into numba's cache by this process (or loaded
+    from it), so that workers started without warm-up load them on their first frames
+    instead of compiling for longer than a client waits for an answer."""
+    twin = ls.Scheduler(config)
+    twin.set_lights(**scene.lights)
+    twin.set_objects(**scene.objects)
+    twin.frame(scene.cameras)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def compiled():
+    compile_for(CONFIG, SCENE)
+
+
 @pytest.fixture(scope="module")
 def server():
     s = LiveServer()
@@ -191,12 +206,6 @@ class Renderer(threading.Thread):
 
 
 def test_a_killed_worker_loses_no_client():
-    # The kernels this scene runs, compiled into numba's cache here, which the workers
-    # (started without warm-up) load on their first frames.
-    twin = ls.Scheduler(CONFIG)
-    twin.set_lights(**SCENE.lights)
-    twin.set_objects(**SCENE.objects)
-    twin.frame(SCENE.cameras)
     with Cluster(2, warm_up=False) as cluster:
         frames = 90
         clients = [Renderer(cluster.url, n, frames, stream=n % 3 == 2) for n in range(6)]

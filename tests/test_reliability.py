@@ -26,6 +26,7 @@ from lightsched_client import Client
 from lightsched_client.wire import JSON, MSGPACK, loads, media_type
 from lightsched_server.cluster import Cluster
 from schemathesis.generation import GenerationMode
+from test_cluster import compile_for
 from test_service import assert_same_frame
 
 import lightsched as ls
@@ -104,10 +105,7 @@ class Targets:
 
 @pytest.fixture(scope="module")
 def worker():
-    twin = ls.Scheduler(CONFIG)  # this scene's kernels into numba's cache, for the worker
-    twin.set_lights(**SCENE.lights)
-    twin.set_objects(**SCENE.objects)
-    twin.frame(SCENE.cameras)
+    compile_for(CONFIG, SCENE)
     # Room for the sessions the fuzzer makes, so that its later requests still reach
     # session code rather than the 429 of a full service.
     with Cluster(1, warm_up=False, env={"LIGHTSCHED_MAX_SESSIONS": "100000"}) as c:
@@ -186,6 +184,7 @@ def test_fuzzed_requests_never_get_a_5xx_and_leave_sessions_intact(worker):
 def test_a_thousand_sessions_fit_their_limits_and_the_ttl_frees_them():
     n, ttl = 1000, 12.0  # the TTL outlasts making them (~5 s here)
     small = city(40, 6, seed=2)
+    compile_for(CONFIG, small)
     env = {"LIGHTSCHED_MAX_SESSIONS": str(n), "LIGHTSCHED_SESSION_TTL": str(ttl)}
     with Cluster(1, warm_up=False, env=env) as c, Client(c.worker_url(0)) as client:
         proc = psutil.Process(c.workers[0].pid)
