@@ -15,7 +15,7 @@ CPP_DEBS := libmsgpack-cxx-dev libcpp-httplib-dev nlohmann-json3-dev libboost-de
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: test test-quick test-ts test-cpp cpp-deps viewer browser-deps test-browser viewer-screenshot \
-	run lint bench bench-quick clean
+	run lint bench bench-quick clean cluster cluster-deps
 
 # The root distribution ships lightsched_client too (the server's wire codec): a venv made
 # before it did has the client's own distribution as well, which is dropped so that only one
@@ -32,7 +32,7 @@ lint: $(STAMP)
 
 # The browser tests (tests/test_viewer.py, marked browser) run in the suite: they need the
 # built viewer and Debian's chromium.
-test: $(STAMP) lint viewer browser-deps
+test: $(STAMP) lint viewer browser-deps cluster-deps
 	$(BIN)/python -m pytest -n 2 -q --durations=15
 	$(MAKE) test-ts
 	$(MAKE) test-cpp
@@ -84,7 +84,7 @@ viewer-screenshot: $(STAMP) viewer browser-deps
 # hypothesis examples, and without the tests marked slow (those that compile or warm up
 # every kernel in a child process). Every module still meets the oracle; `make test` is
 # what CI runs.
-test-quick: $(STAMP) lint
+test-quick: $(STAMP) lint cluster-deps
 	LIGHTSCHED_EXAMPLES=10 $(BIN)/python -m pytest -n 2 -q -m "not slow and not browser" --durations=10
 
 # The viewer is at http://127.0.0.1:8080/viewer. Its origin under either name of this
@@ -93,6 +93,19 @@ test-quick: $(STAMP) lint
 run: $(STAMP) viewer
 	LIGHTSCHED_CORS_ORIGINS=$${LIGHTSCHED_CORS_ORIGINS-http://127.0.0.1:8080,http://localhost:8080} \
 	$(BIN)/python -m lightsched serve --host 127.0.0.1 --port 8080
+
+# Debian's haproxy, in front of the workers of `make cluster` and of the cluster tests
+# (tests/test_cluster.py), which the suite runs: they need it.
+CLUSTER_DEBS := haproxy
+cluster-deps:
+	@dpkg -s $(CLUSTER_DEBS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $(CLUSTER_DEBS); }
+
+# HAProxy on 127.0.0.1:8080 (deploy/haproxy.cfg) in front of WORKERS `lightsched serve`
+# processes, sessions routed by id; Ctrl-C stops them all.
+WORKERS ?= 2
+cluster: $(STAMP) cluster-deps
+	$(BIN)/python -m lightsched_server.cluster --workers $(WORKERS) --port 8080
 
 # Every benchmark, each writing its section of bench/RESULTS.md and its plots.
 bench: $(STAMP)

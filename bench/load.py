@@ -4,12 +4,14 @@
     python bench/load.py --quick          # 1k objects, M = 1, 8, 32, 2 s each (under 30 s)
     python bench/load.py --clients 4,16 --sizes 1k --transports ws --duration 10
     python bench/load.py --write          # also bench/RESULTS.md and bench/plots/load.png
+    python bench/load.py --workers 2      # through HAProxy in front of 2 server processes
 
 Starts the server (``python -m lightsched serve --no-demo``, uvicorn, one process) on a free
-port of 127.0.0.1 and stops it at the end, also on Ctrl-C. Each client is one session with
-its own ``lightsched.scenes.city(N, N/10, seed + client)``; per frame it sends the moving
-lights (``update_lights`` with every light's new position, ``move_lights``) and waits for the
-whole frame (msgpack both ways), paced at 60 fps on an absolute schedule:
+port of 127.0.0.1 and stops it at the end, also on Ctrl-C; with ``--workers N``, N of them
+behind HAProxy (deploy/haproxy.cfg, lightsched_server.cluster), sessions routed by id.
+Each client is one session with its own ``lightsched.scenes.city(N, N/10, seed + client)``;
+per frame it sends the moving lights (``update_lights`` with every light's new position,
+``move_lights``) and waits for the whole frame (msgpack both ways), paced at 60 fps on an absolute schedule:
 
 - slot i of a client is due at t0 + phase + i/60 (phase: a random offset in [0, 1/60) per
   client, or 0 for all with ``--phase aligned``); the client sleeps until then and sends;
@@ -32,6 +34,7 @@ import asyncio
 import math
 import multiprocessing as mp
 import os
+import secrets
 import shlex
 import signal
 import socket
@@ -122,6 +125,12 @@ class Server:
         self.log.seek(0)
         return self.log.read().decode(errors="replace")
 
+    def pids(self) -> list[int]:
+        """The processes that serve the frames."""
+        return [self.proc.pid]
+
+    lb_pid: int | None = None  # a load balancer's process, if one is in front
+
     def stop(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
@@ -131,6 +140,30 @@ class Server:
                 self.proc.kill()
                 self.proc.wait(10)
         self.log.close()
+
+
+class ClusterServer:
+    """HAProxy in front of ``workers`` server processes (lightsched_server.cluster), with
+    Server's interface."""
+
+    def __init__(self, env: dict[str, str], workers: int,
+                 timeout: float = SERVER_START_TIMEOUT) -> None:
+        from lightsched_server.cluster import Cluster
+
+        self.cluster = Cluster(workers, env=env, timeout=timeout)
+        self.port = self.cluster.port
+        self.url = self.cluster.url
+        self.lb_pid = self.cluster.haproxy.pid
+
+    def pids(self) -> list[int]:
+        return [w.pid for w in self.cluster.workers]
+
+    def stop(self) -> None:
+        self.cluster.stop()
+
+
+def start_server(env: dict[str, str], workers: int) -> Server | ClusterServer:
+    return ClusterServer(env, workers) if workers else Server(env)
 
 
 # ---------------------------------------------------------------------------- client side
@@ -222,10 +255,12 @@ class Game:
 
     async def setup(self) -> None:
         await self.http.open()
-        status, data, _ = await self.http.call("POST", "/v1/sessions", dumps({}, MSGPACK))
+        # The client's own id (PUT), which a load balancer routes by.
+        sid = secrets.token_urlsafe(24)
+        status, data, _ = await self.http.call("PUT", f"/v1/sessions/{sid}", dumps({}, MSGPACK))
         if status != 201:
-            raise RuntimeError(f"POST /v1/sessions: {status} {loads(data, MSGPACK)}")
-        self.sid = loads(data, MSGPACK)["id"]
+            raise RuntimeError(f"PUT /v1/sessions/{sid}: {status} {loads(data, MSGPACK)}")
+        self.sid = sid
         self.path = f"/v1/sessions/{self.sid}/frames"
         if self.transport == "ws":
             from websockets.asyncio.client import connect
@@ -415,7 +450,7 @@ def box_busy(a: Any, b: Any) -> float:
     return 1.0 - idle / total if total > 0 else float("nan")
 
 
-def run_case(server: Server, workers: Workers, transport: str, n: int, m: int,
+def run_case(server: Server | ClusterServer, workers: Workers, transport: str, n: int, m: int,
              args: argparse.Namespace, nproc: int) -> dict[str, Any]:
     rng = np.random.default_rng(args.seed + 7919 * m)
     phases = np.zeros(m) if args.phase == "aligned" else rng.uniform(0.0, PERIOD, m)
@@ -433,12 +468,17 @@ def run_case(server: Server, workers: Workers, transport: str, n: int, m: int,
     w1 = w0 + args.duration
     for _, conn in workers.items:
         conn.send(("go", (t0, w0, w1)))
-    sp = psutil.Process(server.proc.pid)
+    sps = [psutil.Process(pid) for pid in server.pids()]
+    lb = psutil.Process(server.lb_pid) if server.lb_pid else None
     me = psutil.Process()
 
     def snap() -> tuple[Any, ...]:
-        return (time.monotonic(), cpu_seconds(sp), thread_seconds(sp),
-                [cpu_seconds(p) for p in [*workers.ps, me]], psutil.cpu_times())
+        threads: dict[int, float] = {}
+        for sp in sps:
+            threads.update(thread_seconds(sp))
+        return (time.monotonic(), sum(cpu_seconds(sp) for sp in sps), threads,
+                [cpu_seconds(p) for p in [*workers.ps, me]], psutil.cpu_times(),
+                cpu_seconds(lb) if lb else 0.0)
 
     time.sleep(max(0.0, w0 - time.monotonic()))
     a = snap()
@@ -448,10 +488,11 @@ def run_case(server: Server, workers: Workers, transport: str, n: int, m: int,
     for p, conn in workers.items:
         results += [ClientResult(**d) for d in workers.recv(conn, p, 120.0)]
     wall = b[0] - a[0]
-    loop_ids = [sp.pid]
+    loop_ids = [sp.pid for sp in sps]  # each process's event loop: its main thread
     loop_cpu = sum(b[2].get(t, 0.0) - a[2].get(t, 0.0) for t in loop_ids)
     row: dict[str, Any] = {
         "transport": TRANSPORTS[transport], "n": n, "l": max(1, n // 10), "m": m,
+        "workers": args.workers, "lb_cpu": 100.0 * (b[5] - a[5]) / wall,
         "setup": setup, "wall": wall,
         "server_cpu": 100.0 * (b[1] - a[1]) / wall,
         "server_loop": 100.0 * loop_cpu / wall,
@@ -459,7 +500,8 @@ def run_case(server: Server, workers: Workers, transport: str, n: int, m: int,
         "box": 100.0 * box_busy(a[4], b[4]),
     }
     # Everything else on the machine (other users' jobs), in % of one core.
-    row["other"] = max(0.0, row["box"] * nproc - row["server_cpu"] - row["client_cpu"])
+    row["other"] = max(0.0, row["box"] * nproc - row["server_cpu"] - row["client_cpu"]
+                       - row["lb_cpu"])
     row.update(summarise(results, args.duration))
     return row
 
@@ -691,6 +733,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--phase", choices=("random", "aligned"), default="random",
                    help="clients' slot phases: random in [0, 1/60) (default), or all at once")
     p.add_argument("--changed-only", action="store_true", help="ask for changed rows only")
+    p.add_argument("--workers", type=int, default=0,
+                   help="server processes behind HAProxy (deploy/haproxy.cfg); 0 (default): "
+                        "one server, no load balancer")
     p.add_argument("--no-search", dest="search", action="store_false",
                    help="skip the extra runs that narrow down the 1k-object capacity")
     p.add_argument("--search-steps", type=int, default=5,
@@ -757,7 +802,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{args.duration:g} s; a fresh server for each transport and size")
         bar = tqdm(total=len(cases), unit="case", file=sys.stderr, dynamic_ncols=True)
 
-        def one(server: Server, t: str, n: int, k: int) -> dict[str, Any]:
+        def one(server: Server | ClusterServer, t: str, n: int, k: int) -> dict[str, Any]:
             assert workers is not None and bar is not None
             name = f"{TRANSPORTS[t]} {fmt_count(n)} M={k}"
             waited, best = 0.0, None
@@ -784,7 +829,7 @@ def main(argv: list[str] | None = None) -> int:
                 # A fresh server per group: a group does not inherit the worker threads (and
                 # their OpenMP teams, see bench/README.md) of the groups before it.
                 t0 = time.perf_counter()
-                server = Server(env)
+                server = start_server(env, args.workers)
                 starts.append(time.perf_counter() - t0)
                 try:
                     for k in clients:
@@ -815,6 +860,10 @@ def main(argv: list[str] | None = None) -> int:
             + "; ".join(capacity(every, n)))
     for line in notes(every, args):
         say(line)
+    if args.workers:
+        say(f"through HAProxy with {args.workers} worker(s): HAProxy's CPU (% of one core) "
+            + ", ".join(f"{r['transport']} {fmt_count(r['n'])} M={r['m']} {r['lb_cpu']:.0f}"
+                        for r in every))
     say(f"\n{time.perf_counter() - t_start:.0f} s in all; 1-minute load average {load[0]:.2f} "
         f"before, {load[1]:.2f} after")
     if args.write:

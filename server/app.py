@@ -240,6 +240,11 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
             raise Problem(400, "malformed", "Malformed body", e.message,
                           pointer=e.pointer) from None
 
+    async def optional_doc(request: Request) -> Any:
+        """The body, or None when there is none (a session with the default config)."""
+        has_body = request.headers.get("content-length", "0") != "0"
+        return await read_doc(request) if has_body else None
+
     async def answer(request: Request, compute: Callable[[Any], Awaitable[Any]]) -> Response:
         """The body decoded, computed and encoded, with a Server-Timing header."""
         t0 = time.perf_counter()
@@ -256,7 +261,7 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
         # Keys travel in Authorization, not cookies: no credentials mode. A preflight may
         # be cached for 10 minutes.
         app.add_middleware(CORSMiddleware, allow_origins=list(cfg.cors_origins),
-                           allow_methods=["GET", "POST", "DELETE"],
+                           allow_methods=["GET", "POST", "PUT", "DELETE"],
                            allow_headers=["Authorization", "Content-Type", "Accept"],
                            expose_headers=["Server-Timing", "Location", "Retry-After",
                                            "WWW-Authenticate"], max_age=600)
@@ -273,7 +278,10 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
 
     @app.get("/healthz", tags=["service"])
     async def healthz(request: Request) -> Response:
-        """Liveness: 200 while the service answers."""
+        """Liveness: 200 while the service answers. It sweeps idle sessions first (the
+        count is of live ones), so that a worker no client calls still frees them: its load
+        balancer's health checks come every second or so."""
+        service.evict_idle()
         return reply(request, {"status": "ok", "sessions": len(service.sessions)})
 
     @app.get("/metrics", tags=["service"])
@@ -295,10 +303,20 @@ def create_app(settings: Settings | None = None, demo: bool = False) -> FastAPI:
     async def create_session(request: Request) -> Response:
         """A new session (a lightsched.Scheduler) with this config; returns its id."""
         key = key_of(request.headers, cfg)
-        has_body = request.headers.get("content-length", "0") != "0"
-        doc = await read_doc(request) if has_body else None
-        s = service.create_session(doc, key)
+        s = service.create_session(await optional_doc(request), key)
         return reply(request, s.info(), 201, {"Location": f"/v1/sessions/{s.id}"})
+
+    @app.put("/v1/sessions/{sid}", tags=["sessions"], openapi_extra=_body("session_request"),
+             responses=_answers("session", 201))
+    async def put_session(request: Request, sid: str) -> Response:
+        """The session of this id (1-64 characters of A-Za-z0-9_-), created with this config
+        (201) or, if it exists with the same config, returned (200). A sharded service
+        routes every request of a session by this id (deploy/haproxy.cfg), so clients choose
+        it; a retried PUT is safe."""
+        key = key_of(request.headers, cfg)
+        s, created = service.put_session(sid, await optional_doc(request), key)
+        return reply(request, s.info(), 201 if created else 200,
+                     {"Location": f"/v1/sessions/{s.id}"})
 
     @app.get("/v1/sessions/{sid}", tags=["sessions"], responses=_answers("session"))
     async def get_session(request: Request, sid: str) -> Response:

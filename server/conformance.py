@@ -3,7 +3,10 @@ answers it must get, as scikit-learn's check_estimator holds every estimator to 
 
 A scenario is a list of steps, each one call of the client API under DESIGN section 7's
 names: ``session`` (with a config), the six scene changes (held until the next frame),
-``frame``, ``explain``, ``info``, ``close`` and the stateless ``schedule``. A ``frame``,
+``frame``, ``explain``, ``info``, ``close`` and the stateless ``schedule``; and ``lose``,
+where the runner deletes the session behind the client's back (as a dead worker loses it:
+the service answers 404 for it), after which the client must rebuild it from its mirror of
+the scene, the next frame a cut of a new session. A ``frame``,
 ``explain`` or ``schedule`` step carries either ``expect`` (the frame_index and every array
 asked for, as the full frame: a client merges changed_only answers before comparing; an
 explanation's object_id, frame_index and columns) or ``error`` (status, type, field, index
@@ -68,10 +71,27 @@ class Script:
         # change is priority, so the client keeps the last value sent (wire.md).
         self.prev: Any = None
         self.held_priority: np.ndarray | None = None
+        # Every change the session took, in order: what a client's mirror replays.
+        self.applied: list[tuple[str, dict[str, Any]]] = []
+        self.config: ls.Config | None = None
+        self.lost = False
 
     def session(self, config: ls.Config) -> None:
         self.steps.append({"call": "session", "config": config_doc(config)})
         self.sched = ls.Scheduler(config)
+        self.config = config
+
+    def start(self, config: ls.Config, scene: Any, changed_only: bool = False) -> None:
+        """A session with the scene set and its first frame."""
+        self.session(config)
+        self.change("set_lights", **scene.lights)
+        self.change("set_objects", **scene.objects)
+        self.frame(scene.cameras, changed_only=changed_only)
+
+    def lose(self) -> None:
+        """The session is lost (the runner deletes it): the next frame rebuilds it."""
+        self.steps.append({"call": "lose"})
+        self.lost = True
 
     def change(self, op: str, **fields: Any) -> None:
         assert op in CHANGE_OPS
@@ -83,17 +103,25 @@ class Script:
         """The frame as the service runs it: cameras and dt checked, then the changes
         and the frame all or nothing."""
         sched, pending, self.pending = self.sched, self.pending, []
-        assert sched is not None
+        assert sched is not None and self.config is not None
         step: dict[str, Any] = {"call": "frame",
                                 "cameras": [_wire(camera_doc(c)) for c in cameras],
                                 "dt": dt, "cut": cut, "changed_only": changed_only,
                                 "outputs": outputs}
+        if self.lost:
+            # A new session given the scene as the client mirrors it, then this frame's
+            # own changes, as a cut (the client makes it one).
+            sched = self.sched = ls.Scheduler(self.config)
+            sched.apply(self.applied)
+            self.prev = self.held_priority = None
+            self.lost, cut = False, True
         try:
             cams = validate_cameras([camera_doc(c) for c in cameras])
             validate_dt(dt)
             with sched.transaction():
                 sched.apply(pending)
                 f = sched.frame(cams, dt=dt, cut=cut)
+            self.applied += pending
             priority = f.priority
             if changed_only and self.prev is not None and self.held_priority is not None:
                 old = self.prev.object_id
@@ -170,10 +198,7 @@ def lifecycle() -> Script:
     s = Script("lifecycle", "A session through every scene call: set, frames with moving "
                             "lights (full and changed_only), object updates and removals, "
                             "light removal, a second camera, a cut, info and close.")
-    s.session(ls.Config(max_lights=4, shadow_budget=3, fade_in=0.1, fade_out=0.1))
-    s.change("set_lights", **sc.lights)
-    s.change("set_objects", **sc.objects)
-    s.frame(sc.cameras)
+    s.start(ls.Config(max_lights=4, shadow_budget=3, fade_in=0.1, fade_out=0.1), sc)
     for i in range(1, 4):
         s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, i))
         s.frame(sc.cameras, dt=0.05, changed_only=i > 1)
@@ -204,10 +229,7 @@ def refusals() -> Script:
     sc = city(30, 8, seed=6, shadow_fraction=0.3)
     s = Script("refusals", "Bad calls and their problem documents; each leaves the session "
                            "as it was, as the frames after them show.")
-    s.session(ls.Config(max_lights=3))
-    s.change("set_lights", **sc.lights)
-    s.change("set_objects", **sc.objects)
-    s.frame(sc.cameras, changed_only=True)  # a session's first frame: answered in full
+    s.start(ls.Config(max_lights=3), sc, changed_only=True)  # a first frame: answered in full
     bad = {k: np.array(v, copy=True) for k, v in sc.lights.items()}
     bad["radius"][2] = -1.0
     s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, 1))
@@ -243,7 +265,39 @@ def stateless() -> Script:
     return s
 
 
-SCENARIOS = (lifecycle, refusals, stateless)
+def recovery() -> Script:
+    sc = city(50, 10, seed=8, shadow_fraction=0.3)
+    s = Script("recovery", "A session lost twice (its worker died): the client rebuilds it "
+                           "from its mirror of the scene (sets, updates and removals, some "
+                           "refused) and the frame it was sending goes on as a cut.")
+    s.start(ls.Config(max_lights=3, shadow_budget=2, fade_in=0.1, fade_out=0.1), sc)
+    ids = sc.objects["id"]
+    for i in range(1, 3):
+        s.change("update_lights", id=sc.lights["id"], position=move_lights(sc.lights, i))
+        s.frame(sc.cameras, dt=0.05, changed_only=True)
+    s.change("update_objects", id=ids[:4], bounds_min=sc.objects["bounds_min"][:4] + 2.0,
+             bounds_max=sc.objects["bounds_max"][:4] + 2.0)
+    s.change("remove_lights", id=sc.lights["id"][:2])
+    s.frame(sc.cameras, dt=0.05)
+    s.change("remove_objects", id=np.array([123456], np.int32))
+    s.frame(sc.cameras)  # refused: nothing of it joins the mirror
+    # A field the set did not give (a client's mirror cannot fold it into the set's
+    # arrays without the defaults: it keeps the call), then more moves after it.
+    s.change("update_lights", id=sc.lights["id"][2:4], priority=np.array([5.0, 0.5]))
+    s.change("remove_objects", id=ids[5:8])
+    s.frame(sc.cameras, dt=0.05)
+    s.lose()
+    s.change("update_lights", id=sc.lights["id"][2:], position=move_lights(sc.lights, 3)[2:])
+    s.frame(sc.cameras, dt=0.05, changed_only=True)  # rebuilt: a new session's frame 0
+    s.frame(sc.cameras, dt=0.05, changed_only=True)
+    s.info()
+    s.lose()
+    s.frame(sc.cameras, dt=0.05)
+    s.info()
+    return s
+
+
+SCENARIOS = (lifecycle, refusals, stateless, recovery)
 
 
 def conformance_files() -> dict[str, bytes]:

@@ -116,6 +116,10 @@ class FrameRequest(BaseModel):
     outputs: list[OutputName] | None = None
     changed_only: bool = False
     stats: bool = True
+    seq: int | None = Field(
+        None, ge=0, description="makes the request safe to retry: the frame_index this frame "
+        "will have (the session's frames so far). The same seq as the last frame's gets that "
+        "answer again, nothing applied twice; any other is refused (409, field seq).")
 
 
 class ScheduleRequest(BaseModel):
@@ -131,7 +135,7 @@ class ScheduleRequest(BaseModel):
 
 
 class SessionRequest(BaseModel):
-    """POST /v1/sessions."""
+    """POST /v1/sessions, PUT /v1/sessions/{id}."""
 
     model_config = STRICT
     config: ConfigModel | None = None

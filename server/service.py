@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 import secrets
 import time
 from dataclasses import dataclass, field
@@ -39,6 +40,10 @@ from .settings import Settings
 PER_OBJECT = frozenset(PER_OBJECT_NAMES)
 log = logging.getLogger(__name__)
 SWEEP = 1.0  # seconds between sweeps for idle sessions on lookups
+# Client-chosen session ids (PUT /v1/sessions/{id}): one URL path segment without escapes,
+# which a load balancer can hash as it comes; token_urlsafe's alphabet, so that the
+# service's own ids (32 characters) are valid ones too.
+SESSION_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
 # What "changed" means for changed_only: the set, its order, weights, states and the
 # residual (DESIGN's per-object outputs except priority, which moves whenever a light does
 # and only orders the slots; the residual moves as often but is lighting the shader adds).
@@ -136,6 +141,9 @@ class Session:
     pending: int = 0
     last_used: float = field(default_factory=time.monotonic)
     prev: ls.Frame | None = None
+    # The last frame's answer document, for a retried request of the same seq: encoding it
+    # again gives the same bytes.
+    answer: dict[str, Any] | None = None
 
     def info(self) -> dict[str, Any]:
         s = self.scheduler
@@ -174,6 +182,31 @@ class Service:
         sid = sid or secrets.token_urlsafe(24)  # 192 random bits: unguessable
         session = self.sessions[sid] = Session(sid, owner, ls.Scheduler(config))
         return session
+
+    def put_session(self, sid: str, doc: Any, owner: str | None) -> tuple[Session, bool]:
+        """PUT /v1/sessions/{id}: the session of this id, created if it does not exist
+        (True) or returned as it is (False: retrying a PUT is safe). Sharded services route
+        by the id, so the client chooses it; a live session of this id with another config
+        or another key is a conflict (409), not something to overwrite."""
+        if SESSION_ID.fullmatch(sid) is None:
+            bad = next((i for i, ch in enumerate(sid) if SESSION_ID.fullmatch(ch) is None), 64)
+            raise Problem(422, "validation", "Invalid input",
+                          f"id: a session id is 1 to 64 characters of A-Z, a-z, 0-9, '_' and "
+                          f"'-' (first bad character at {bad})", field="id", index=bad,
+                          pointer="/id")
+        req = parse(SessionRequest, doc if doc is not None else {})
+        s = self.sessions.get(sid)
+        if s is not None and self._idle(s, time.monotonic()):
+            del self.sessions[sid]
+            s = None
+        if s is None:
+            return self.create_session(doc, owner, sid), True
+        if s.owner != owner or config_of(req.config).to_dict() != s.scheduler.config.to_dict():
+            raise Problem(409, "session-conflict", "Session exists",
+                          f"session {sid!r} exists with another config or key", field="id",
+                          pointer="/id")
+        s.last_used = time.monotonic()
+        return s, False
 
     def session(self, sid: str, owner: str | None) -> Session:
         # A frame looks its session up twice: sweeping every session each time would cost
@@ -241,12 +274,24 @@ class Service:
         s.pending += 1
         try:
             async with s.lock:
+                if req.seq is not None and req.seq != s.scheduler.frame_index:
+                    return self._repeated(s, req.seq)
                 if self._small(s.scheduler, req):
                     return self._step(s, req, cams, dt)
                 return await anyio.to_thread.run_sync(self._step, s, req, cams, dt)
         finally:
             s.pending -= 1
             s.last_used = time.monotonic()
+
+    def _repeated(self, s: Session, seq: int) -> dict[str, Any]:
+        """The answer to a request whose seq is not the next frame's: the last answer again
+        for the last frame's seq (its first answer was lost on the way back), else 409."""
+        last = s.scheduler.frame_index - 1
+        if seq == last and s.answer is not None and s.answer["frame_index"] == last:
+            return s.answer
+        raise Problem(409, "out-of-order", "Frame out of order",
+                      f"seq {seq}: the next frame of session {s.id!r} is {last + 1} (a "
+                      f"repeat of {last} gets its answer again)", field="seq", pointer="/seq")
 
     def _step(self, s: Session, req: Any, cams: list[ls.Camera], dt: float) -> dict[str, Any]:
         sched = s.scheduler
@@ -280,7 +325,7 @@ class Service:
         self.metrics.observe_frame(f.stats)
         doc = frame_document(f, req.outputs, sched.frame_index - 1,
                              s.prev if req.changed_only else None, req.stats)
-        s.prev = f
+        s.prev, s.answer = f, doc
         return doc
 
     def _small(self, sched: ls.Scheduler, req: Any) -> bool:

@@ -85,13 +85,16 @@ def run(doc: dict[str, Any], client: Client, stream: bool) -> None:
             assert {k: info[k] for k in step["expect"]} == step["expect"], where
         elif call == "close":
             session.close()
+        elif call == "lose":  # as a dead worker loses it
+            client.call("DELETE", f"/v1/sessions/{session.id}")
         else:
             raise AssertionError(f"{where}: unknown call")
 
 
 def test_the_suite_covers_every_call():
     calls = {s["call"] for path in SUITE for s in json.loads(path.read_text())["steps"]}
-    assert calls == {"session", "frame", "explain", "info", "close", "schedule", *CHANGE_OPS}
+    assert calls == {"session", "frame", "explain", "info", "close", "schedule", "lose",
+                     *CHANGE_OPS}
     errors = [s["error"]["status"] for path in SUITE for s in json.loads(path.read_text())["steps"]
               if "error" in s]
     assert 404 in errors and errors.count(422) >= 5

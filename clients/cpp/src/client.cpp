@@ -10,7 +10,11 @@
 #include <boost/beast/websocket.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <msgpack.hpp>
+#include <random>
+#include <thread>
+#include <unordered_map>
 
 namespace lightsched {
 
@@ -200,7 +204,157 @@ std::vector<std::int64_t> positions(const Array& ids, const std::int32_t* wanted
   return out;
 }
 
+// The service could not be reached (no answer at all): worth sending again.
+class Unreachable : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// A failure that sending the same request again may get past: no answer, or a proxy with
+// no worker for it (502/503/504: the request did not run), or a stream that dropped (503).
+bool transient(const std::exception& e) {
+  if (const auto* r = dynamic_cast<const RemoteError*>(&e)) {
+    return r->status == 502 || r->status == 503 || r->status == 504;
+  }
+  return dynamic_cast<const Unreachable*>(&e) != nullptr;
+}
+
+// The session is gone (404: its worker died, or it idled past the TTL), or the session of
+// its id is behind the client (409 out-of-order: a worker taken for dead came back).
+bool lost(const std::exception& e) {
+  const auto* r = dynamic_cast<const RemoteError*>(&e);
+  const std::string suffix = ":out-of-order";
+  return r && (r->status == 404 || (r->status == 409 && r->type.size() >= suffix.size() &&
+                                    r->type.compare(r->type.size() - suffix.size(), suffix.size(), suffix) == 0));
+}
+
+// Pauses between attempts: 0, 25 ms, doubling to 1 s, while `seconds` have not passed.
+class Backoff {
+ public:
+  explicit Backoff(double seconds)
+      : end_(std::chrono::steady_clock::now() +
+             std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(seconds))) {}
+  // Waits before the next attempt; false when the time is up.
+  bool next() {
+    if (first_) return !(first_ = false);
+    pause_ = std::min(1.0, std::max(0.025, 2 * pause_));
+    if (std::chrono::steady_clock::now() + std::chrono::duration<double>(pause_) > end_) return false;
+    std::this_thread::sleep_for(std::chrono::duration<double>(pause_));
+    return true;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point end_;
+  double pause_ = 0.0;
+  bool first_ = true;
+};
+
+// A random session id: 192 bits, base64url (the service's alphabet).
+std::string new_session_id() {
+  static const char* ALPHABET = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+  std::random_device rd;
+  std::string out;
+  for (int i = 0; i < 32; i++) out += ALPHABET[rd() % 64];
+  return out;
+}
+
+bool is_float(const std::string& dtype) { return dtype == "float32" || dtype == "float64"; }
+
+double value_at(const Array& a, std::size_t i) {
+  const std::string& t = a.dtype;
+  if (t == "float64") return a.data<double>()[i];
+  if (t == "float32") return a.data<float>()[i];
+  if (t == "int32") return a.data<std::int32_t>()[i];
+  if (t == "uint32") return a.data<std::uint32_t>()[i];
+  if (t == "int64") return static_cast<double>(a.data<std::int64_t>()[i]);
+  if (t == "uint64") return static_cast<double>(a.data<std::uint64_t>()[i]);
+  if (t == "int16") return a.data<std::int16_t>()[i];
+  if (t == "uint16") return a.data<std::uint16_t>()[i];
+  if (t == "int8") return a.data<std::int8_t>()[i];
+  return a.data<std::uint8_t>()[i];  // uint8, bool
+}
+
+// `a` in another dtype (float64 or int64: what a folded update of a different dtype needs).
+Array as_dtype(const Array& a, const std::string& dtype) {
+  if (a.dtype == dtype) return a;
+  Array out{dtype, a.shape, {}};
+  out.bytes.resize(out.size() * out.itemsize());
+  for (std::size_t i = 0; i < a.size(); i++) {
+    if (dtype == "float64") out.data<double>()[i] = value_at(a, i);
+    else out.data<std::int64_t>()[i] = static_cast<std::int64_t>(value_at(a, i));
+  }
+  return out;
+}
+
+// Rows `keep` of `a`.
+Array take_rows(const Array& a, const std::vector<bool>& keep) {
+  Array out{a.dtype, a.shape, {}};
+  const std::size_t width = a.row_size() * a.itemsize();
+  out.shape[0] = std::count(keep.begin(), keep.end(), true);
+  out.bytes.reserve(out.size() * out.itemsize());
+  for (std::size_t r = 0; r < keep.size(); r++) {
+    if (keep[r]) out.bytes.insert(out.bytes.end(), a.bytes.begin() + r * width, a.bytes.begin() + (r + 1) * width);
+  }
+  return out;
+}
+
 }  // namespace
+
+void SceneMirror::Table::apply(const std::string& op, const Fields& fields) {
+  bool known = base.has_value();
+  for (const auto& kv : fields) known = known && base->count(kv.first);
+  if (op == "set") {
+    base = fields;
+    calls.clear();
+  } else if (!known || !calls.empty()) {
+    calls.push_back({op, fields});
+  } else if (op == "remove") {
+    const Array& ids = base->at("id");
+    std::vector<double> gone;
+    for (std::size_t i = 0; i < fields.at("id").size(); i++) gone.push_back(value_at(fields.at("id"), i));
+    std::vector<bool> keep(ids.size());
+    for (std::size_t r = 0; r < ids.size(); r++) {
+      keep[r] = std::find(gone.begin(), gone.end(), value_at(ids, r)) == gone.end();
+    }
+    for (auto& kv : *base) kv.second = take_rows(kv.second, keep);
+  } else {
+    std::unordered_map<double, std::size_t> row_of;
+    const Array& ids = base->at("id");
+    for (std::size_t r = 0; r < ids.size(); r++) row_of[value_at(ids, r)] = r;
+    const Array& upd_ids = fields.at("id");
+    for (const auto& [name, given] : fields) {
+      Array value = given;
+      Array& old = base->at(name);
+      if (old.dtype != value.dtype) {
+        const std::string to = is_float(old.dtype) || is_float(value.dtype) ? "float64" : "int64";
+        old = as_dtype(old, to);
+        value = as_dtype(value, to);
+      }
+      const std::size_t width = old.row_size() * old.itemsize();
+      for (std::size_t i = 0; i < upd_ids.size(); i++) {
+        std::memcpy(&old.bytes[row_of.at(value_at(upd_ids, i)) * width], &value.bytes[i * width], width);
+      }
+    }
+  }
+}
+
+void SceneMirror::apply(const std::vector<Change>& changes) {
+  for (const auto& c : changes) {
+    const auto cut = c.op.find('_');
+    const std::string op = c.op.substr(0, cut), kind = c.op.substr(cut + 1);
+    (kind == "lights" ? lights_ : objects_).apply(op, c.fields);
+  }
+}
+
+std::vector<Change> SceneMirror::replay() const {
+  std::vector<Change> out;
+  for (const auto& [kind, table] : {std::pair<std::string, const Table*>{"lights", &lights_},
+                                    std::pair<std::string, const Table*>{"objects", &objects_}}) {
+    if (table->base) out.push_back({"set_" + kind, *table->base});
+    for (const auto& c : table->calls) out.push_back({c.op + "_" + kind, c.fields});
+  }
+  return out;
+}
 
 std::size_t Array::size() const {
   std::size_t n = 1;
@@ -343,7 +497,7 @@ Client::Raw Client::raw(const std::string& method, const std::string& path, cons
     req.headers.emplace("Content-Type", content_type);
   }
   auto res = http_->cli.send(req);
-  if (!res) throw std::runtime_error("request to the service failed: " + httplib::to_string(res.error()));
+  if (!res) throw Unreachable("request to the service failed: " + httplib::to_string(res.error()));
   return {res->status, res->get_header_value("Content-Type"), res->body};
 }
 
@@ -353,18 +507,39 @@ std::string Client::call(const std::string& method, const std::string& path, con
   return r.body;
 }
 
-Session Client::session(const Config& config, bool stream) {
+std::string Client::call_retrying(const std::string& method, const std::string& path, const std::string& body) {
+  Backoff backoff(retry_seconds);
+  for (;;) {
+    try {
+      return call(method, path, body);
+    } catch (const std::exception& e) {
+      if (!transient(e) || !backoff.next()) throw;
+    }
+  }
+}
+
+namespace {
+// The frame_index of a session answer (PUT, GET).
+std::int64_t frame_index_of(const std::string& body, std::string* id = nullptr) {
+  auto handle = msgpack::unpack(body.data(), body.size());
+  const auto* sid = find(handle.get(), "id");
+  const auto* index = find(handle.get(), "frame_index");
+  if (!sid || !index) throw std::runtime_error("malformed answer: no session id");
+  if (id) *id = key_of(*sid);
+  return as_int(*index);
+}
+}  // namespace
+
+Session Client::session(const Config& config, bool stream, const std::string& id) {
   msgpack::sbuffer buf;
   Packer pk(&buf);
   pk.pack_map(1);
   pack_str(pk, "config");
   pack_config(pk, config);
-  auto body = call("POST", "/v1/sessions", std::string(buf.data(), buf.size()));
-  auto handle = msgpack::unpack(body.data(), body.size());
-  const auto* id = find(handle.get(), "id");
-  const auto* index = find(handle.get(), "frame_index");
-  if (!id || !index) throw std::runtime_error("malformed answer: no session id");
-  return Session(this, key_of(*id), as_int(*index), stream);
+  std::string body(buf.data(), buf.size());
+  std::string sid = id.empty() ? new_session_id() : id;
+  const auto index = frame_index_of(call_retrying("PUT", "/v1/sessions/" + sid, body), &sid);
+  return Session(this, sid, index, stream, std::move(body));
 }
 
 Frame Client::schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
@@ -390,46 +565,87 @@ Frame Client::schedule(const Fields& lights, const Fields& objects, const std::v
 }
 
 Frame Session::frame(const std::vector<Camera>& cameras, const FrameOptions& options) {
-  std::vector<Change> changes;
-  changes.swap(changes_);
-  msgpack::sbuffer buf;
-  Packer pk(&buf);
-  pk.pack_map(4 + (options.outputs.empty() ? 0 : 1) + (options.changed_only ? 1 : 0) + (options.stats ? 0 : 1));
-  pack_str(pk, "dt");
-  pk.pack_double(options.dt);
-  pack_str(pk, "cut");
-  options.cut ? pk.pack_true() : pk.pack_false();
-  pack_str(pk, "cameras");
-  pack_cameras(pk, cameras);
-  pack_str(pk, "changes");
-  pk.pack_array(static_cast<std::uint32_t>(changes.size()));
-  for (const auto& c : changes) {
-    pk.pack_map(2);
-    pack_str(pk, "op");
-    pack_str(pk, c.op);
-    pack_str(pk, "fields");
-    pack_fields(pk, c.fields);
+  std::vector<Change> own;
+  own.swap(changes_);
+  auto request = [&](const std::vector<Change>& changes, bool cut, std::int64_t seq) {
+    msgpack::sbuffer buf;
+    Packer pk(&buf);
+    pk.pack_map(5 + (options.outputs.empty() ? 0 : 1) + (options.changed_only ? 1 : 0) + (options.stats ? 0 : 1));
+    pack_str(pk, "dt");
+    pk.pack_double(options.dt);
+    pack_str(pk, "cut");
+    cut ? pk.pack_true() : pk.pack_false();
+    pack_str(pk, "cameras");
+    pack_cameras(pk, cameras);
+    pack_str(pk, "changes");
+    pk.pack_array(static_cast<std::uint32_t>(changes.size()));
+    for (const auto& c : changes) {
+      pk.pack_map(2);
+      pack_str(pk, "op");
+      pack_str(pk, c.op);
+      pack_str(pk, "fields");
+      pack_fields(pk, c.fields);
+    }
+    pack_str(pk, "seq");
+    pk.pack_int64(seq);
+    if (!options.outputs.empty()) {
+      pack_str(pk, "outputs");
+      pack_outputs(pk, options.outputs);
+    }
+    if (options.changed_only) {
+      pack_str(pk, "changed_only");
+      pk.pack_true();
+    }
+    if (!options.stats) {
+      pack_str(pk, "stats");
+      pk.pack_false();
+    }
+    return std::string(buf.data(), buf.size());
+  };
+  std::string body = request(own, options.cut, frame_index_);
+  std::string answered;
+  // Sent again while the service cannot be reached (its seq keeps it from running twice);
+  // a lost session is made again and given the mirrored scene, then this frame's own
+  // changes, as a cut.
+  Backoff backoff(client_->retry_seconds);
+  for (;;) {
+    try {
+      answered = send(body);
+      break;
+    } catch (const std::exception& e) {
+      const bool gone = lost(e) && !closed_;
+      if ((!gone && !transient(e)) || !backoff.next()) throw;
+      ws_.reset();
+      if (gone) {
+        frame_index_ = remake();
+        std::vector<Change> changes = mirror_.replay();
+        changes.insert(changes.end(), own.begin(), own.end());
+        body = request(changes, true, frame_index_);
+        last_.reset();
+        recoveries_++;
+      }
+    }
   }
-  if (!options.outputs.empty()) {
-    pack_str(pk, "outputs");
-    pack_outputs(pk, options.outputs);
-  }
-  if (options.changed_only) {
-    pack_str(pk, "changed_only");
-    pk.pack_true();
-  }
-  if (!options.stats) {
-    pack_str(pk, "stats");
-    pk.pack_false();
-  }
-  const std::string request(buf.data(), buf.size());
-  auto answer = decode_frame(stream_ ? stream_call(request)
-                                     : client_->call("POST", "/v1/sessions/" + id_ + "/frames", request));
+  mirror_.apply(own);
+  auto answer = decode_frame(answered);
   Frame f = answer.changed_only ? merge_changed(last_ ? &*last_ : nullptr, answer.frame, answer.rows, answer.has_object_id)
                                 : std::move(answer.frame);
   last_ = f;
   frame_index_ = f.frame_index + 1;
   return f;
+}
+
+std::string Session::send(const std::string& request) {
+  return stream_ ? stream_call(request) : client_->call("POST", "/v1/sessions/" + id_ + "/frames", request);
+}
+
+std::int64_t Session::remake() {
+  const std::string path = "/v1/sessions/" + id_;
+  try {
+    client_->call("DELETE", path, "");  // a stale copy, if a worker came back with one
+  } catch (const RemoteError&) {
+  }
+  return frame_index_of(client_->call_retrying("PUT", path, body_));
 }
 
 std::map<std::string, std::int64_t> Session::info() {
@@ -486,10 +702,13 @@ std::string Session::stream_call(const std::string& request) {
     ws_->ws.read(ws_->buffer);
   } catch (const boost::system::system_error& e) {
     // A refused handshake or a closed stream (1009: a message over the service's limit).
-    const bool too_big = ws_ && ws_->ws.reason().code == websocket::close_code::too_big;
+    // No close frame (the worker or the connection died), or going away / restarting: a
+    // 503, worth sending again; 1009: a message over the service's limit (413).
+    const auto code = ws_ ? static_cast<int>(ws_->ws.reason().code) : 0;
     const std::string reason = ws_ ? std::string(ws_->ws.reason().reason.c_str()) : "";
     ws_.reset();
-    const int status = too_big ? 413 : 400;
+    const int status = code == websocket::close_code::too_big ? 413
+                       : (code == 0 || code == 1001 || code == 1011 || code == 1012) ? 503 : 400;
     throw RemoteError(status, "", "Stream closed", "the stream failed: " + std::string(e.what()) +
                                                        (reason.empty() ? "" : " (" + reason + ")"),
                       std::nullopt, std::nullopt, std::nullopt);
@@ -502,6 +721,7 @@ std::string Session::stream_call(const std::string& request) {
 }
 
 void Session::close() {
+  closed_ = true;
   if (ws_) {
     boost::system::error_code ignored;
     ws_->ws.close(websocket::close_code::normal, ignored);

@@ -268,6 +268,8 @@ void run_scenario(const json& doc, Client& client, bool stream) {
       }
     } else if (call == "close") {
       session->close();
+    } else if (call == "lose") {  // as a dead worker loses it
+      client.raw("DELETE", "/v1/sessions/" + session->id(), "");
     } else {
       CHECK(false, where << ": unknown call");
     }

@@ -2,7 +2,13 @@
  * The embedded lightsched API over the service: a Client makes sessions (remote
  * Schedulers) and runs the stateless schedule(); a Session holds scene changes until
  * frame(), which sends them with the frame over HTTP or the session's WebSocket stream.
- * Only fetch, WebSocket, TextEncoder and atob/btoa are used, so it runs in browsers and in
+ * Sessions survive a sharded service (deploy/haproxy.cfg routes by session id): the client
+ * chooses the id (PUT /v1/sessions/{id}); every frame carries a sequence number (seq), so a
+ * frame whose answer was lost (a broken connection, a 502/503 while a worker is replaced)
+ * is sent again without running twice; a session that answers 404 (its worker died) is
+ * made again and given the scene the client mirrors (SceneMirror) within that frame, which
+ * then counts as a cut (``recoveries`` counts those).
+ * Only fetch, WebSocket, TextEncoder, crypto and atob/btoa are used, so it runs in browsers and in
  * Node 20+ (whose WebSocket needs --experimental-websocket before Node 22, or pass one in
  * ClientOptions.WebSocket).
  */
@@ -69,6 +75,8 @@ export interface ClientOptions {
   /** The HTTP transport (default: the global fetch). */
   fetch?: FetchLike;
   WebSocket?: typeof WebSocket;
+  /** How long a frame is sent again while the service cannot be reached (default 10 s). */
+  retrySeconds?: number;
 }
 
 export type Problem = {
@@ -98,6 +106,130 @@ export class ValidationError extends RemoteError {
   constructor(status: number, problem: Problem) {
     super(status, problem);
     this.name = "ValidationError";
+  }
+}
+
+/** Statuses of a proxy with no worker for the request (yet): the request did not run. */
+const UNAVAILABLE = new Set([502, 503, 504]);
+
+/** A failure that sending the same request again may get past: the transport failed (fetch
+ * throws, a stream dropped) or a proxy had no worker. Only requests safe to repeat
+ * (idempotent ones, frames with a seq) are retried on it. */
+function transient(e: unknown): boolean {
+  return e instanceof RemoteError ? UNAVAILABLE.has(e.status) : true;
+}
+
+/** The session is gone (404: its worker died, or it idled past the TTL), or the session of
+ * its id is behind the client (409 out-of-order: a worker taken for dead came back). */
+function lost(e: unknown): boolean {
+  return e instanceof RemoteError && (e.status === 404
+    || (e.status === 409 && String(e.problem.type ?? "").endsWith(":out-of-order")));
+}
+
+const sleep = (ms: number) => new Promise<void>((resolve) => setTimeout(resolve, ms));
+
+/** Pauses between attempts: 0, 25 ms, doubling to 1 s, until ``seconds`` have passed. */
+function* backoff(seconds: number): Generator<number> {
+  const end = Date.now() + seconds * 1000;
+  let pause = 0;
+  for (;;) {
+    yield pause;
+    if (Date.now() + pause > end) return;
+    pause = Math.min(1000, Math.max(25, 2 * pause));
+  }
+}
+
+/** A random session id: 192 bits, base64url (the service's alphabet). */
+export function newSessionId(): string {
+  const bytes = globalThis.crypto.getRandomValues(new Uint8Array(24));
+  return btoa(String.fromCharCode(...bytes)).replace(/\+/g, "-").replace(/\//g, "_");
+}
+
+/** ``call`` until it succeeds or fails other than transiently, or ``seconds`` pass. */
+async function retrying<T>(seconds: number, call: () => Promise<T>): Promise<T> {
+  let last: unknown;
+  for (const pause of backoff(seconds)) {
+    if (pause) await sleep(pause);
+    try {
+      return await call();
+    } catch (e) {
+      if (!transient(e)) throw e;
+      last = e;
+    }
+  }
+  throw last;
+}
+
+type Row = number | boolean | number[];
+type Change = { op: string; fields: Record<string, unknown> };
+
+/** An input array as rows of plain values (a copy: the caller may reuse its arrays). */
+function rowsOf(v: unknown): Row[] {
+  if (v instanceof NdArray) {
+    const flat = v.dtype === "bool" ? Array.from(v.data as Uint8Array, (x) => x !== 0)
+      : Array.from(v.data as ArrayLike<number | bigint>, Number);
+    if (v.shape.length <= 1) return flat;
+    const width = v.shape.slice(1).reduce((a, b) => a * b, 1);
+    return Array.from({ length: v.shape[0] }, (_, i) => flat.slice(i * width, (i + 1) * width) as number[]);
+  }
+  if (ArrayBuffer.isView(v)) return Array.from(v as unknown as ArrayLike<number | bigint>, Number);
+  return (v as Row[]).map((x) => (Array.isArray(x) ? [...x] : x));
+}
+
+/** One kind (lights or objects) of the scene as the client set it: the last set_ call's
+ * rows with later updates and removals folded in, so that replaying it costs one set_ call
+ * however many frames went by. An update naming a field the set_ did not give (whose
+ * default may derive from other fields) is kept as a call of its own, and so is everything
+ * after it, until the next set_ (lightsched_client.client._Table, the same rule). */
+class Table {
+  private base?: Record<string, Row[]>;
+  private calls: [string, Record<string, Row[]>][] = [];
+  private rowOf?: Map<number, number>;
+
+  apply(op: string, given: Record<string, unknown>): void {
+    const fields: Record<string, Row[]> = {};
+    for (const [k, v] of Object.entries(given)) if (v !== undefined) fields[k] = rowsOf(v);
+    if (op === "set") {
+      this.base = fields;
+      this.calls = [];
+      this.rowOf = undefined;
+    } else if (!this.base || this.calls.length || !Object.keys(fields).every((k) => k in this.base!)) {
+      this.calls.push([op, fields]);
+    } else if (op === "remove") {
+      const gone = new Set(fields.id as number[]);
+      const keep = (this.base.id as number[]).map((id) => !gone.has(id));
+      for (const k of Object.keys(this.base)) this.base[k] = this.base[k].filter((_, i) => keep[i]);
+      this.rowOf = undefined;
+    } else {
+      if (!this.rowOf) this.rowOf = new Map((this.base.id as number[]).map((id, i) => [id, i]));
+      const rows = (fields.id as number[]).map((id) => this.rowOf!.get(id)!);
+      for (const [k, values] of Object.entries(fields)) {
+        rows.forEach((r, i) => { this.base![k][r] = values[i]; });
+      }
+    }
+  }
+
+  replay(kind: string): Change[] {
+    const out: Change[] = this.base ? [{ op: `set_${kind}`, fields: this.base }] : [];
+    return out.concat(this.calls.map(([op, fields]) => ({ op: `${op}_${kind}`, fields })));
+  }
+}
+
+/** The scene a session holds, as far as the client gave it: the changes of every frame the
+ * service answered. A session lost with its worker is rebuilt from it. */
+export class SceneMirror {
+  private tables: Record<string, Table> = { lights: new Table(), objects: new Table() };
+
+  apply(changes: Change[]): void {
+    for (const { op, fields } of changes) {
+      const [verb, kind] = op.split("_");
+      this.tables[kind].apply(verb, fields);
+    }
+  }
+
+  /** The changes that rebuild the scene in an empty session. */
+  replay(): Change[] {
+    return this.tables.lights.replay("lights").concat(this.tables.objects.replay("objects"));
   }
 }
 
@@ -206,6 +338,7 @@ export class Client {
   readonly encoding: Encoding;
   readonly fetch: FetchLike;
   readonly WebSocket?: typeof WebSocket;
+  readonly retrySeconds: number;
 
   constructor(url: string, options: ClientOptions = {}) {
     this.url = url.replace(/\/+$/, "");
@@ -213,6 +346,7 @@ export class Client {
     this.encoding = options.encoding ?? MSGPACK;
     this.fetch = options.fetch ?? (globalThis.fetch.bind(globalThis) as unknown as FetchLike);
     this.WebSocket = options.WebSocket ?? globalThis.WebSocket;
+    this.retrySeconds = options.retrySeconds ?? 10;
   }
 
   /** One request: ``doc`` encoded, the answer decoded; RemoteError on a refusal. */
@@ -225,6 +359,7 @@ export class Client {
     });
     const body = new Uint8Array(await response.arrayBuffer());
     const kind = mediaType(response.headers.get("content-type"));
+    // Not the service's document when the media type is not: a proxy's page (HAProxy's 503).
     const answer = body.length && kind ? decode(body, kind) : undefined;
     if (!response.ok) {
       const problem = (answer ?? { title: response.statusText, status: response.status }) as Problem;
@@ -245,10 +380,14 @@ export class Client {
     return frameOf(await this.call("POST", "/v1/schedule", doc), undefined);
   }
 
-  /** A new session (a remote lightsched.Scheduler) with this config. */
-  async session(config?: Record<string, unknown> | null, options: { stream?: boolean } = {}): Promise<Session> {
-    const info = await this.call("POST", "/v1/sessions", config ? { config } : {});
-    return new Session(this, info, options.stream ?? false);
+  /** A session (a remote lightsched.Scheduler) with this config, of this id or a new
+   * random one (PUT: a load balancer routes by it, and a retried PUT is safe). */
+  async session(config?: Record<string, unknown> | null,
+                options: { stream?: boolean; id?: string } = {}): Promise<Session> {
+    const body = config ? { config } : {};
+    const path = `/v1/sessions/${options.id ?? newSessionId()}`;
+    const info = await retrying(this.retrySeconds, () => this.call("PUT", path, body));
+    return new Session(this, info, options.stream ?? false, body);
   }
 
   async health(): Promise<Record<string, unknown>> {
@@ -270,18 +409,28 @@ export class Session {
   private changes: { op: string; fields: Record<string, unknown> }[] = [];
   private last?: Frame;
   private ws?: WebSocket;
+  private current?: WebSocket;  // the stream whose events count (not a dropped one's)
   private opening?: Promise<WebSocket>;
   private waiters: Waiter[] = [];
   // Messages no request waits for: a refused handshake's problem, sent before any request.
   private inbox: (Uint8Array | string)[] = [];
   private closedWith?: Error;
   private queue: Promise<unknown> = Promise.resolve();
+  /** The scene as the service took it, to rebuild a lost session from. */
+  readonly mirror = new SceneMirror();
+  /** Times the session was rebuilt (its worker died). */
+  recoveries = 0;
+  /** Deleted by close(): a 404 then is not a loss. */
+  closed = false;
+  private readonly body: Record<string, unknown>;
 
-  constructor(readonly client: Client, info: Record<string, unknown>, stream: boolean) {
+  constructor(readonly client: Client, info: Record<string, unknown>, stream: boolean,
+              body?: Record<string, unknown>) {
     this.id = info.id as string;
     this.config = info.config as Record<string, unknown>;
     this.frameIndex = info.frame_index as number;
     this.stream = stream;
+    this.body = body ?? { config: this.config };
   }
 
   setLights(fields: Fields): void { this.changes.push({ op: "set_lights", fields: fieldsDoc(fields) }); }
@@ -309,13 +458,58 @@ export class Session {
     return run;
   }
 
+  /** The frame, sent again while the service cannot be reached (its seq keeps it from
+   * running twice), and rebuilt if the session was lost. */
   private async send(doc: Record<string, unknown>): Promise<Frame> {
-    const answer = this.stream ? await this.streamCall(doc)
-      : await this.client.call("POST", `/v1/sessions/${this.id}/frames`, doc);
-    const f = frameOf(answer, this.last);
-    this.last = f;
-    this.frameIndex = f.frame_index + 1;
-    return f;
+    const own = doc.changes as Change[];
+    doc.seq = this.frameIndex;
+    let last: unknown;
+    for (const pause of backoff(this.client.retrySeconds)) {
+      if (pause) await sleep(pause);
+      try {
+        const answer = this.stream ? await this.streamCall(doc)
+          : await this.client.call("POST", `/v1/sessions/${this.id}/frames`, doc);
+        this.mirror.apply(own);
+        const f = frameOf(answer, this.last);
+        this.last = f;
+        this.frameIndex = f.frame_index + 1;
+        return f;
+      } catch (e) {
+        if (lost(e) && !this.closed) {
+          const info = await retrying(this.client.retrySeconds, () => this.remake());
+          // The mirrored scene, then the frame's own changes, as a new session's cut.
+          doc = { ...doc, changes: this.mirror.replay().concat(own), cut: true, seq: info.frame_index };
+          this.frameIndex = info.frame_index as number;
+          this.last = undefined;
+          this.recoveries += 1;
+        } else if (!transient(e)) {
+          throw e;
+        }
+        this.dropStream();
+        last = e;
+      }
+    }
+    throw last;
+  }
+
+  /** The session made again, empty (a stale copy of it dropped first). */
+  private async remake(): Promise<Record<string, unknown>> {
+    const path = `/v1/sessions/${this.id}`;
+    try {
+      await this.client.call("DELETE", path);
+    } catch (e) {
+      if (!(e instanceof RemoteError)) throw e;
+    }
+    return this.client.call("PUT", path, this.body);
+  }
+
+  /** Forgets the stream (a broken or refused one): the next frame opens a new one. */
+  private dropStream(): void {
+    const ws = this.current;
+    this.ws = this.current = undefined;
+    this.closedWith = undefined;
+    this.inbox = [];
+    if (ws && ws.readyState <= 1) ws.close();
   }
 
   private async streamCall(doc: Record<string, unknown>): Promise<Record<string, unknown>> {
@@ -353,17 +547,22 @@ export class Session {
       }
       const url = this.client.url.replace(/^http/, "ws") + `/v1/sessions/${this.id}/stream${query}`;
       const ws = new Ws(url);
+      this.current = ws;
       ws.binaryType = "arraybuffer";
       this.closedWith = undefined;
       this.inbox = [];
       ws.onmessage = (e: MessageEvent) => {
+        if (this.current !== ws) return;  // a dropped stream's
         const data = typeof e.data === "string" ? e.data : new Uint8Array(e.data as ArrayBuffer);
         const waiter = this.waiters.shift();
         if (waiter) waiter.resolve(data);
         else this.inbox.push(data);
       };
       ws.onclose = (e: CloseEvent) => {
-        const status = e.code === 1009 ? 413 : 400;
+        if (this.current !== ws) return;  // a dropped stream's
+        // 1009: the WebSocket's 413; closed without a close frame (1006: the worker or the
+        // connection died), going away (1001) or restarting (1012): a 503, worth retrying.
+        const status = e.code === 1009 ? 413 : [1001, 1006, 1011, 1012].includes(e.code) ? 503 : 400;
         this.closedWith = remoteError(status, {
           title: "Stream closed", status, detail: `the service closed the stream (${e.code}): ${e.reason}`,
         });
@@ -402,6 +601,7 @@ export class Session {
 
   /** Closes the stream and (by default) deletes the session. */
   async close(options: { delete?: boolean } = {}): Promise<void> {
+    this.closed = options.delete ?? true;
     if (this.ws) {
       this.ws.close();
       this.ws = undefined;

@@ -90,6 +90,8 @@ export async function runScenario(doc: any, client: Client, stream: boolean): Pr
       for (const [k, v] of Object.entries(step.expect)) assert.equal(info[k], v, `${where}: ${k}`);
     } else if (step.call === "close") {
       await session!.close();
+    } else if (step.call === "lose") {  // as a dead worker loses it
+      await client.call("DELETE", `/v1/sessions/${session!.id}`);
     } else {
       assert.fail(`${where}: unknown call`);
     }

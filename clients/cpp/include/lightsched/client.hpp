@@ -139,7 +139,33 @@ Frame merge_changed(const Frame* prev, const Frame& answer, const Array& rows, b
 
 class Client;
 
-// A session: lightsched.Scheduler's calls, computed by the service.
+// The scene a session holds, as far as the client gave it: the changes of every frame the
+// service answered, so that a session lost with its worker (the service answers 404) is
+// rebuilt on the worker that owns its id now. Per kind (lights, objects): the last set_
+// call's arrays with later updates and removals folded in; an update naming a field the
+// set_ did not give (whose default may derive from other fields) is kept as a call of its
+// own, and so is everything after it, until the next set_ (the Python and TypeScript
+// clients' rule).
+class SceneMirror {
+ public:
+  void apply(const std::vector<Change>& changes);
+  // The changes that rebuild the scene in an empty session.
+  std::vector<Change> replay() const;
+
+ private:
+  struct Table {
+    std::optional<Fields> base;
+    std::vector<Change> calls;  // op without its kind: "update", "remove"
+    void apply(const std::string& op, const Fields& fields);
+  };
+  Table lights_, objects_;
+};
+
+// A session: lightsched.Scheduler's calls, computed by the service. Every frame carries a
+// sequence number (seq): a frame whose answer was lost (a broken connection, a 502/503
+// from a load balancer while a worker is replaced) is sent again without running twice,
+// for up to Client::retry_seconds; a lost session is rebuilt from its mirror within the
+// frame, which then counts as a cut (recoveries() counts those).
 class Session {
  public:
   const std::string& id() const { return id_; }
@@ -163,16 +189,25 @@ class Session {
   void close();
   // Frames go over the session's WebSocket stream (Boost.Beast) instead of HTTP.
   bool stream() const { return stream_; }
+  // Times the session was rebuilt (its worker died).
+  int recoveries() const { return recoveries_; }
 
  private:
   friend class Client;
-  Session(Client* client, std::string id, std::int64_t frame_index, bool stream)
-      : client_(client), id_(std::move(id)), frame_index_(frame_index), stream_(stream) {}
+  Session(Client* client, std::string id, std::int64_t frame_index, bool stream, std::string body)
+      : client_(client), id_(std::move(id)), frame_index_(frame_index), stream_(stream),
+        body_(std::move(body)) {}
   std::string stream_call(const std::string& request);
+  std::string send(const std::string& request);
+  std::int64_t remake();
   Client* client_;
   std::string id_;
   std::int64_t frame_index_;
   bool stream_;
+  std::string body_;  // the PUT body that makes the session (its config)
+  SceneMirror mirror_;
+  int recoveries_ = 0;
+  bool closed_ = false;
   std::vector<Change> changes_;
   std::optional<Frame> last_;
   // The stream, opened by the first frame (copies of a Session share it).
@@ -188,9 +223,13 @@ class Client {
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;
 
-  // A new session; with stream, its frames go over its WebSocket (one connection, opened
-  // by the first frame; the key is sent in the handshake's Authorization header).
-  Session session(const Config& config = {}, bool stream = false);
+  // A session of this id (or of a new random one when empty), made with PUT: a load
+  // balancer routes by the id, and a retried PUT is safe. With stream, its frames go over
+  // its WebSocket (one connection, opened by the first frame; the key is sent in the
+  // handshake's Authorization header).
+  Session session(const Config& config = {}, bool stream = false, const std::string& id = "");
+  // How long a frame is sent again while the service cannot be reached.
+  double retry_seconds = 10.0;
   // The stateless one-frame call (lightsched.schedule).
   Frame schedule(const Fields& lights, const Fields& objects, const std::vector<Camera>& cameras,
                  const Config& config = {}, const std::vector<std::string>& outputs = {});
@@ -206,6 +245,8 @@ class Client {
  private:
   friend class Session;
   std::string call(const std::string& method, const std::string& path, const std::string& body);
+  // call(), sent again while it fails transiently: only for requests safe to repeat.
+  std::string call_retrying(const std::string& method, const std::string& path, const std::string& body);
   struct Http;
   std::unique_ptr<Http> http_;
   std::string url_;
