@@ -686,13 +686,15 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
 @dataclass(slots=True)
 class Casters:
     """The casters stage's output: caster_offsets, caster_ids and caster_masks of the
-    shadow lights in rank order (DESIGN section 3); ``by_light``: per shadow light row its
+    shadow lights in rank order (DESIGN section 3), ``rows`` the casters' object rows;
+    ``by_light``: per shadow light row its
     (object rows ascending, masks), which the next frame keeps for the lights whose light
     and cameras did not change; ``how``: the plan's entry."""
 
     offsets: np.ndarray
     ids: np.ndarray
     masks: np.ndarray
+    rows: np.ndarray
     by_light: dict[int, tuple[np.ndarray, np.ndarray]]
     how: str
 
@@ -760,7 +762,7 @@ class _Finder:
         n_s = shadow_rows.size
         if n_s == 0:
             return Casters(np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.uint32),
-                           {}, "skipped: no shadow lights")
+                           np.zeros(0, np.int64), {}, "skipped: no shadow lights")
         found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
         todo = []
         # A few lights: Python lists, not numpy calls, whose per-call overhead dominates
@@ -790,9 +792,10 @@ class _Finder:
                 plan.append(self._locals(rows_t, local, todo, vols, found))
         # (np.cumsum of a short Python list costs more than the list.)
         offsets = np.array(list(accumulate((f[0].size for f in found), initial=0)), np.int64)
-        ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32, copy=False)
+        rows = np.concatenate([f[0] for f in found]).astype(np.int64, copy=False)
+        ids = objs.id[rows].astype(np.int32, copy=False)
         masks = np.concatenate([f[1] for f in found]).astype(np.uint32, copy=False)
-        return Casters(offsets, ids, masks, dict(zip(shadow_rows.tolist(), found, strict=True)),
+        return Casters(offsets, ids, masks, rows, dict(zip(shadow_rows.tolist(), found, strict=True)),
                        "; ".join(plan))
 
     def _suns(self, rows_t: np.ndarray, sun: list[int], todo: list[int], vols: Volumes,
