@@ -703,20 +703,27 @@ def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights
                  objects: ObjectStore, shadows: ShadowSet, packed: Packed, grid: Grid,
                  cameras: Cameras, visible: np.ndarray, cascade_overlap: float,
                  tuning: Tuning, light_culling: bool = False) -> Casters:
-    """The casters stage. Casters depend on the light, the cameras and every object: with
-    plan.keep_casters, a light none of them changed for keeps its list; when only objects
-    changed (plan.patch_casters), a directional light's list changes only at those
-    objects' rows, which alone it sweeps. ``visible``: the objects' visibility;
+    """The casters stage. Casters depend on the light, the cameras (but for point and spot
+    lights under caster_culling "light") and every object: with plan.keep_casters (or,
+    for point and spot lights, plan.keep_local_casters), a light none of them changed for
+    keeps its list; when only objects changed (plan.patch_casters), its list changes only
+    at those objects' rows, which alone it tests. ``visible``: the objects' visibility;
     ``light_culling``: caster_culling = "light" (point and spot casters get no camera
     test)."""
     shadow_rows = shadows.rows
     recompute = np.ones(shadow_rows.size, np.bool_)
     patch = None
-    if plan.keep_casters:
+    if plan.keep_casters or plan.keep_local_casters:
         changed = np.zeros(len(lights), np.bool_)
         changed[changes.light_rows] = True
-        again = np.array([changed[r] or int(r) not in last.by_light
-                          for r in shadow_rows.tolist()], np.bool_)
+        again = changed[shadow_rows]
+        again |= np.array([int(r) not in last.by_light for r in shadow_rows.tolist()],
+                          np.bool_)
+        if not plan.keep_casters:
+            # The cameras moved: cascades follow them.
+            again |= lights.type[shadow_rows] == DIRECTIONAL
+        if not plan.keep_local_casters:
+            again |= lights.type[shadow_rows] != DIRECTIONAL
         if not plan.patch_casters:
             recompute = again
         else:
@@ -730,7 +737,18 @@ def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights
     finder = _Finder(lights, objects, packed.rows, grid, (plan.origin, plan.fast), visible,
                      tuning, light_culling)
     return finder.casters(cameras.frames, cameras.splits, shadow_rows, recompute,
-                          None if last is None else last.by_light, patch, cascade_overlap)
+                          None if last is None else last.by_light, patch, cascade_overlap,
+                          plan.keep_local_casters and not plan.keep_casters)
+
+
+def _merge(rows_c: np.ndarray, masks_c: np.ndarray, changed: np.ndarray, rows_p: np.ndarray,
+           masks_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A kept list (rows_c ascending, masks_c) without the ``changed`` rows (flags by
+    object row), with the changed rows' new casters (rows_p ascending, masks_p, nonzero)
+    in their places."""
+    keep = ~changed[rows_c]
+    at = np.searchsorted(rows_c[keep], rows_p)
+    return np.insert(rows_c[keep], at, rows_p), np.insert(masks_c[keep], at, masks_p)
 
 
 @dataclass
@@ -749,15 +767,19 @@ class _Finder:
 
     def casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                 recompute: np.ndarray, cached: dict[int, tuple[np.ndarray, np.ndarray]] | None,
-                patch: tuple[np.ndarray, np.ndarray] | None, overlap: float) -> Casters:
+                patch: tuple[np.ndarray, np.ndarray] | None, overlap: float,
+                cameras_moved: bool = False) -> Casters:
         """Directional lights scan every object against their cascade sweeps (over a grid
         of every object, boxes round SWEEP_GROUP of its positions' objects first); point
         and spot lights walk the light pass's grid, and when it holds the visible objects
         only, a grid of the same kind over the invisible casting objects that meet their
         spheres' bounding box (objects need not be visible to cast). Lights with
         ``recompute`` False take their lists from ``cached``. ``patch`` = (the object rows
-        that changed, per shadow light whether it or the cameras did): a directional light
-        that did not keeps its cached list but at those rows, which alone it sweeps."""
+        that changed, per shadow light whether it or the cameras it depends on did): a
+        light that did not keeps its cached list but at those rows, which alone it tests
+        (a directional light sweeps them, a point or spot light walks a grid of just
+        them). ``cameras_moved``: the cameras moved (lists kept or patched are point and
+        spot lists under caster_culling "light")."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
         if n_s == 0:
@@ -773,8 +795,12 @@ class _Finder:
                 todo.append(t)
             else:
                 found[t] = cached[row]  # type: ignore[index]
-        plan = [f"{n_s - len(todo)} kept (light, cameras and objects unchanged)"] \
-            if len(todo) < n_s else []
+        kept = "light and objects unchanged" if cameras_moved else \
+            "light, cameras and objects unchanged"
+        plan = [f"{n_s - len(todo)} kept ({kept})"] if len(todo) < n_s else []
+        if cameras_moved and (len(todo) < n_s or patch is not None):
+            plan.append('caster_culling "light": point and spot lists do not depend on the '
+                        "cameras, which moved")
         if todo:
             rows_t = shadow_rows[todo]
             vols = culling_volumes(lights, rows_t, frames, splits, overlap,
@@ -788,6 +814,11 @@ class _Finder:
             if patched:
                 plan.append(self._patched(rows_t, patched, todo, vols, found, cached, patch[0]))
             local = [i for i, d in enumerate(is_dir) if not d]
+            patched = [] if patch is None else [i for i in local if not patch[1][todo[i]]]
+            local = [i for i in local if i not in patched]
+            if patched:
+                plan.append(self._patched_locals(rows_t, patched, todo, vols, found, cached,
+                                                 patch[0]))
             if local:
                 plan.append(self._locals(rows_t, local, todo, vols, found))
         # (np.cumsum of a short Python list costs more than the list.)
@@ -838,14 +869,41 @@ class _Finder:
         changed[rows_p] = True
         for i, t in enumerate(patched):
             rows_c, masks_c = cached[int(rows_t[t])]
-            keep = ~changed[rows_c]
             hit = np.flatnonzero(bits[i])
-            # Both ascending: the new rows go in at their places.
-            at = np.searchsorted(rows_c[keep], rows_p[hit])
-            found[todo[t]] = (np.insert(rows_c[keep], at, rows_p[hit]),
-                              np.insert(masks_c[keep], at, bits[i][hit]))
+            found[todo[t]] = _merge(rows_c, masks_c, changed, rows_p[hit], bits[i][hit])
         return (f"{len(patched)} directional: the {rows_p.size} changed objects against "
                 f"{vm.shape[1]} cascade sweeps, the others' kept")
+
+    def _patched_locals(self, rows_t: np.ndarray, patched: list[int], todo: list[int],
+                        vols: Volumes, found: list, cached: dict, rows_p: np.ndarray) -> str:
+        """The point and spot lights ``patched`` keep their cached lists but at the changed
+        object rows ``rows_p``: they walk a grid of just those objects, whose records are
+        made as the light pass's (the same frame), so each object gets the test and the
+        bits it would get in a full walk."""
+        objs = self.objects
+        rows_l = rows_t[patched].astype(np.int64)
+        if len(patched) < len(todo):
+            vols = Volumes(*(v[patched] for v in vols))
+        changed = np.zeros(len(objs), np.bool_)
+        changed[rows_p] = True
+        new_rows: list[np.ndarray] = [np.zeros(0, np.int64)] * len(patched)
+        new_masks: list[np.ndarray] = [np.zeros(0, np.uint32)] * len(patched)
+        if rows_p.size:
+            lo, hi = objs.bounds_min[rows_p], objs.bounds_max[rows_p]
+            f_box = frame_box(np.concatenate([lo.min(0), hi.max(0)]), self.frame)
+            # One cell: each light tests every changed object its bounds reach.
+            shape = grid_shape(f_box[:3], f_box[3:],
+                               2.0 * max(float(np.max(f_box[3:] - f_box[:3])), 1.0))
+            index, recs, _ = records_grid(lo, hi, objs.mask[rows_p],
+                                          np.ones(rows_p.size, np.bool_), shape, self.frame)
+            new_rows, new_masks = self._in_grid(rows_l, index,
+                                                recs._replace(rows=rows_p[recs.rows]), vols)
+        for i, t in enumerate(patched):
+            rows_c, masks_c = cached[int(rows_t[t])]
+            # (grid_casters gives each light's rows ascending.)
+            found[todo[t]] = _merge(rows_c, masks_c, changed, new_rows[i], new_masks[i])
+        return (f"{len(patched)} point/spot: the {rows_p.size} changed objects only (a grid "
+                "of them), the others' kept")
 
     def _locals(self, rows_t: np.ndarray, local: list[int], todo: list[int], vols: Volumes,
                 found: list) -> str:
