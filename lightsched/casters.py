@@ -10,7 +10,8 @@ Point and spot lights find their casters by walking the object grids of the ligh
 (``grid_casters``, the walker of walk.py); directional casters are a parallel scan over
 every object (``sweep_casters``), since their influence volume is everything, or, over a
 grid of every object, over boxes round runs of its positions first (``sweep_groups``): a
-shadow distance keeps few of them.
+shadow distance keeps few of them. A frame where only a few objects changed keeps each
+list but at those objects, which alone it tests (``changed_casters``, ``sweep_casters``).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .grid import (
     grid_shape,
     group_boxes_of,
     records_grid,
+    records_of,
 )
 from .jit import PRANGE_ONLY
 from .priority import box_d2, spot_cone
@@ -680,6 +682,35 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
 
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def changed_casters(lights, rows, recs, objects, vols):
+    """Casters (DESIGN section 2, "Casters") of the shadowed point and spot lights ``rows``
+    among a few objects, each light testing each of them by ``_caster`` as grid_casters
+    does in a walk, on the calling thread (waking a second costs more than a few objects'
+    tests). lights: PackedLights; rows [T] int64: their packed rows; recs: Records of the
+    objects (grid.records_of, rows ascending); objects: CasterObjects of the store; vols:
+    Volumes indexed like rows. Returns (offsets [T + 1], object rows, caster masks): light
+    t's casters at offsets[t]..offsets[t + 1] - 1, rows ascending."""
+    hot, lf = lights.hot, lights.f
+    box, box_rows = recs.box, recs.rows
+    lo, hi = box[:, 0:3], box[:, 3:6]
+    casts, omask, w_lo, w_hi = objects.casts, objects.mask, objects.lo, objects.hi
+    vn, vq, vm = vols.vn, vols.vq, vols.vm
+    m = box_rows.shape[0]
+    out_rows = np.empty(rows.shape[0] * m, np.int64)
+    out_mask = np.empty(rows.shape[0] * m, np.uint32)
+    offsets = np.zeros(rows.shape[0] + 1, np.int64)
+    n = 0
+    for t in range(rows.shape[0]):
+        j = rows[t]
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        for v in range(m):
+            n = _caster(hot, lf, j, typ, np.int64(t), v, box, box_rows, casts, omask, lo, hi,
+                        w_lo, w_hi, vn, vq, vm, out_rows, out_mask, n)
+        offsets[t + 1] = n
+    return offsets, out_rows[:n], out_mask[:n]
+
+
 # --------------------------------------------------------------------------- the casters stage
 
 
@@ -777,9 +808,9 @@ class _Finder:
         ``recompute`` False take their lists from ``cached``. ``patch`` = (the object rows
         that changed, per shadow light whether it or the cameras it depends on did): a
         light that did not keeps its cached list but at those rows, which alone it tests
-        (a directional light sweeps them, a point or spot light walks a grid of just
-        them). ``cameras_moved``: the cameras moved (lists kept or patched are point and
-        spot lists under caster_culling "light")."""
+        (a directional light sweeps them, a point or spot light tests each).
+        ``cameras_moved``: the cameras moved (lists kept or patched are point and spot
+        lists under caster_culling "light")."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
         if n_s == 0:
@@ -877,33 +908,27 @@ class _Finder:
     def _patched_locals(self, rows_t: np.ndarray, patched: list[int], todo: list[int],
                         vols: Volumes, found: list, cached: dict, rows_p: np.ndarray) -> str:
         """The point and spot lights ``patched`` keep their cached lists but at the changed
-        object rows ``rows_p``: they walk a grid of just those objects, whose records are
-        made as the light pass's (the same frame), so each object gets the test and the
-        bits it would get in a full walk."""
+        object rows ``rows_p``, each of which they test (changed_casters) on its record made
+        as the light pass's (the same frame), so each gets the bits a full walk gives it."""
         objs = self.objects
         rows_l = rows_t[patched].astype(np.int64)
         if len(patched) < len(todo):
             vols = Volumes(*(v[patched] for v in vols))
         changed = np.zeros(len(objs), np.bool_)
         changed[rows_p] = True
-        new_rows: list[np.ndarray] = [np.zeros(0, np.int64)] * len(patched)
-        new_masks: list[np.ndarray] = [np.zeros(0, np.uint32)] * len(patched)
-        if rows_p.size:
-            lo, hi = objs.bounds_min[rows_p], objs.bounds_max[rows_p]
-            f_box = frame_box(np.concatenate([lo.min(0), hi.max(0)]), self.frame)
-            # One cell: each light tests every changed object its bounds reach.
-            shape = grid_shape(f_box[:3], f_box[3:],
-                               2.0 * max(float(np.max(f_box[3:] - f_box[:3])), 1.0))
-            index, recs, _ = records_grid(lo, hi, objs.mask[rows_p],
-                                          np.ones(rows_p.size, np.bool_), shape, self.frame)
-            new_rows, new_masks = self._in_grid(rows_l, index,
-                                                recs._replace(rows=rows_p[recs.rows]), vols)
+        recs = records_of(objs.bounds_min, objs.bounds_max, objs.mask,
+                          rows_p.astype(np.int64), self.frame)
+        at, new_rows, new_masks = changed_casters(
+            self.packed, rows_l, recs,
+            CasterObjects(objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
+            vols)
+        at = at.tolist()
         for i, t in enumerate(patched):
             rows_c, masks_c = cached[int(rows_t[t])]
-            # (grid_casters gives each light's rows ascending.)
-            found[todo[t]] = _merge(rows_c, masks_c, changed, new_rows[i], new_masks[i])
-        return (f"{len(patched)} point/spot: the {rows_p.size} changed objects only (a grid "
-                "of them), the others' kept")
+            found[todo[t]] = _merge(rows_c, masks_c, changed, new_rows[at[i]:at[i + 1]],
+                                    new_masks[at[i]:at[i + 1]])
+        return (f"{len(patched)} point/spot: the {rows_p.size} changed objects only, the "
+                "others' kept")
 
     def _locals(self, rows_t: np.ndarray, local: list[int], todo: list[int], vols: Volumes,
                 found: list) -> str:

@@ -113,6 +113,24 @@ class NamedIds(NamedTuple):
     static: np.ndarray  # bool: the object is static now (False: no longer in the store)
 
 
+class ViewState(NamedTuple):
+    """view_pass' findings per view of this frame (index v; views in shadow_lights order,
+    then bit), before rendering."""
+
+    light: np.ndarray         # int64: its light's index in shadow_lights
+    bit: np.ndarray           # int64: its bit in shadow_views
+    key: np.ndarray           # int64 [V, 4]: its key, as ViewMemory.key
+    camera: np.ndarray        # int64: its camera's position in the list (directional), -1
+    memory_row: np.ndarray    # int64: its row in last frame's memory, -1: none
+    tile: np.ndarray          # int64 [V, 3]: its atlas tile now, -1: none
+    ready: np.ndarray         # bool: ready (before this frame's rendering)
+    age: np.ndarray           # int64: its age before this frame
+    named: np.ndarray         # bool: ViewMemory.named, this frame's names included
+    named_static: np.ndarray  # bool
+    dirty: np.ndarray         # bool
+    chosen: np.ndarray        # bool: in shadow_update
+
+
 class ViewPass(NamedTuple):
     """view_pass' output: per shadow light its bits (uint32 [S]) and whether every view is
     ready (bool [S]); the views rendered and their texels; the next frame's memory (its
@@ -211,7 +229,7 @@ def allocate_tiles(wanted: list[tuple[tuple[int, int], int, tuple[int, int]]],
 
 @nb.njit(cache=True, nogil=True, inline="always")
 def _key_less(a: np.ndarray, b: np.ndarray) -> bool:
-    """a < b for two keys [4], lexicographically."""
+    """a < b for two view keys a, b [4] (ViewMemory.key's layout), lexicographically."""
     for i in range(4):
         if a[i] != b[i]:
             return a[i] < b[i]
@@ -220,8 +238,10 @@ def _key_less(a: np.ndarray, b: np.ndarray) -> bool:
 
 @nb.njit(cache=True, nogil=True)
 def _find(memory, key):
-    """The memory row of view ``key`` [4] (ViewMemory.key's layout), -1 if none: a binary
-    search of memory.order, the rows by ascending key."""
+    """The row of ``memory`` (ViewMemory) that remembers view ``key`` [4] (its layout:
+    DESIGN section 2, "Shadow views": a directional view is remembered by light id, camera
+    id and cascade, a point or spot view by light id and bit), -1 if none: a binary search
+    of memory.order, the rows by ascending key."""
     keys, order = memory.key, memory.order
     lo, hi = 0, order.shape[0]
     while lo < hi:
@@ -240,7 +260,8 @@ def _find(memory, key):
 
 @nb.njit(cache=True, nogil=True)
 def _named_at(named, oid):
-    """-1 if object id ``oid`` is not among named.ids (NamedIds), else its position."""
+    """-1 if object id ``oid`` is not among named.ids (NamedIds: the ids update_objects
+    named, DESIGN section 2, "Dirty"), else its position."""
     ids = named.ids
     at = np.searchsorted(ids, oid)
     if at < ids.shape[0] and ids[at] == oid:
@@ -480,24 +501,27 @@ def view_pass(lights, casters, objects, cameras, named, memory, n_casc, budget):
     for v in range(n_v):
         if vcam[v] < 0 and not (ready[v] or chosen[v]):
             ready_light[vj[v]] = False
-    out = _remember(lights, casters, objects, cameras, memory, vj, vbit, vkey, vcam, vmem,
-                    tile, light_now, ready, age, v_named, v_named_static, is_dirty, chosen,
-                    matched, now)
+    state = ViewState(vj, vbit, vkey, vcam, vmem, tile, ready, age, v_named, v_named_static,
+                      is_dirty, chosen)
+    out = _remember(lights, casters, objects, cameras, memory, state, light_now, matched)
     return ViewPass(views, dirty, static_dirty, update, ready_light, drawn, texels, out)
 
 
 @nb.njit(cache=True, nogil=True)
-def _remember(lights, casters, objects, cameras, memory, vj, vbit, vkey, vcam, vmem, tile,
-              light_now, ready, age, v_named, v_named_static, is_dirty, chosen, matched, now):
+def _remember(lights, casters, objects, cameras, memory, state, light_now, matched):
     """The next frame's ViewMemory (DESIGN section 2, "Dirty", "Ready", "Budget"): a view
-    rendered now (``chosen``) holds this frame's light, tier, tile, camera and casters, is
-    ready, of age 0; a dirty one not rendered ages by one; a clean one is of age 0; each
-    keeps the named flags and readiness view_pass found (its placement is this frame's).
-    Then last frame's rows no view of this frame matched whose light is still a shadow
-    light. The arrays are view_pass' own, per view v (vj, vbit: its light and bit; vkey its
-    key; vcam its camera or -1; vmem its memory row or -1; tile; ready, age, v_named,
-    v_named_static as found; is_dirty, chosen) or per light (light_now); matched: per
-    memory row; now: scratch of the casters' size."""
+    rendered now (``state.chosen``) holds this frame's light, tier, tile, camera and
+    casters, is ready, of age 0; a dirty one not rendered ages by one; a clean one is of
+    age 0; each keeps the named flags and readiness view_pass found (its placement is this
+    frame's). Then last frame's rows no view of this frame matched whose light is still a
+    shadow light. lights, casters, objects, cameras, memory: view_pass' arguments; state:
+    ViewState, per view of this frame; light_now [S, N_LIGHT]: each shadow light as its
+    views remember it; matched [M]: memory rows a view of this frame found."""
+    vj, vbit, vkey, vcam, vmem, tile = (state.light, state.bit, state.key, state.camera,
+                                        state.memory_row, state.tile)
+    ready, age, v_named, v_named_static = (state.ready, state.age, state.named,
+                                           state.named_static)
+    is_dirty, chosen = state.dirty, state.chosen
     n_v = vj.shape[0]
     n_m = memory.key.shape[0]
     live = np.sort(lights.ids)
@@ -611,13 +635,13 @@ def _same_placement(a: tuple[np.ndarray, ...] | None, b: tuple[np.ndarray, ...])
 
 
 def _tiles(last: ShadowViews | None, shadows: ShadowSet, types: np.ndarray, atlas: int
-           ) -> tuple[dict[tuple[int, int], tuple[int, int, int]], np.ndarray, int]:
+           ) -> tuple[dict[tuple[int, int], tuple[int, int, int]], np.ndarray, int | None]:
     """(the tiles by (light id, bit), shadow_rect, tiles moved): last frame's while the
-    point and spot shadow lights and their tiers hold (allocate_tiles would keep every
-    tile then), else allocate_tiles'."""
+    shadow lights and their tiers hold (allocate_tiles would keep every tile then; tiles
+    moved None), else allocate_tiles'."""
     placement = _placement(shadows, types)
     if last is not None and _same_placement(last.placement, placement):
-        return last.tiles, last.rect, 0
+        return last.tiles, last.rect, None
     tiles_last = {} if last is None else last.tiles
     shadow_ids = shadows.ids.tolist()
     tiers = shadows.tier.tolist()
@@ -687,14 +711,17 @@ def update_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
     n_s = shadows.rows.size
     out = ShadowViews(res.views, res.dirty, res.static_dirty, res.update, rect, ids_cam,
                       res.ready, res.memory._replace(order=order), tiles,
-                      _placement(shadows, types), not res.dirty.any(), moved, res.texels,
+                      _placement(shadows, types), not res.dirty.any(), moved or 0, res.texels,
                       _how(n_s, int(np.count_nonzero(res.dirty)), res.drawn, moved))
     return out, sampled(shadows, res.ready, lights, config)
 
 
-def _how(n_s: int, dirty_lights: int, drawn: int, moved: int) -> str:
+def _how(n_s: int, dirty_lights: int, drawn: int, moved: int | None) -> str:
     if n_s == 0:
         return "skipped: no shadow lights"
+    if moved is None:
+        return (f"{dirty_lights} of {n_s} shadow lights with dirty views, {drawn} views to "
+                "render; the atlas tiles kept (shadow lights and tiers unchanged)")
     return (f"{dirty_lights} of {n_s} shadow lights with dirty views, {drawn} views to render, "
             f"{moved} tiles moved")
 
