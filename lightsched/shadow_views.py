@@ -236,7 +236,7 @@ def _key_less(a: np.ndarray, b: np.ndarray) -> bool:
     return False
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _find(memory, key):
     """The row of ``memory`` (ViewMemory) that remembers view ``key`` [4] (its layout:
     DESIGN section 2, "Shadow views": a directional view is remembered by light id, camera
@@ -258,18 +258,7 @@ def _find(memory, key):
     return -1
 
 
-@nb.njit(cache=True, nogil=True)
-def _named_at(named, oid):
-    """-1 if object id ``oid`` is not among named.ids (NamedIds: the ids update_objects
-    named, DESIGN section 2, "Dirty"), else its position."""
-    ids = named.ids
-    at = np.searchsorted(ids, oid)
-    if at < ids.shape[0] and ids[at] == oid:
-        return at
-    return -1
-
-
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _caster_causes(memory, m, objects, now, named):
     """Which caster changes dirty view m of ``memory`` (DESIGN section 2, "Dirty"), against
     its casters now: ``now`` the object store rows (ascending, so ascending ids) of
@@ -279,7 +268,8 @@ def _caster_causes(memory, m, objects, now, named):
     ids, values = memory.cast_ids, memory.cast_values
     a, a_end = memory.cast_at[m], memory.cast_at[m + 1]
     b, b_end = 0, now.shape[0]
-    check_named = named.ids.shape[0] > 0
+    # The union of both lists comes in ascending id: the named ids are walked along it.
+    names, p = named.ids, 0
     dyn = stat = n_dyn = n_stat = False
     while a < a_end or b < b_end:
         then_id = ids[a] if a < a_end else np.int64(2**62)
@@ -306,13 +296,14 @@ def _caster_causes(memory, m, objects, now, named):
                 stat = True
             else:
                 dyn = True
-        if check_named:
-            at = _named_at(named, then_id if held else now_id)
-            if at >= 0:
-                if named.static[at] or was_static:
-                    n_stat = True
-                else:
-                    n_dyn = True
+        oid = then_id if held else now_id
+        while p < names.shape[0] and names[p] < oid:
+            p += 1
+        if p < names.shape[0] and names[p] == oid:
+            if named.static[p] or was_static:
+                n_stat = True
+            else:
+                n_dyn = True
         if held:
             a += 1
         if here:
@@ -320,7 +311,7 @@ def _caster_causes(memory, m, objects, now, named):
     return dyn, stat, n_dyn, n_stat
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _light_state(lights, r, out):
     """out [N_LIGHT] = the light of store row r as its views remember it (DESIGN "Dirty":
     point: position, radius; spot: also direction and outer_angle; directional:
@@ -599,7 +590,7 @@ def _remember(lights, casters, objects, cameras, memory, state, light_now, match
     return out
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _copy_row(memory, m, out, v, d):
     """Row v of ``out`` (ViewMemory) takes what memory row m was rendered with (light,
     tier, tile, camera, casters from cast_ids[d] on); returns the casters' end."""
