@@ -10,7 +10,8 @@ Point and spot lights find their casters by walking the object grids of the ligh
 (``grid_casters``, the walker of walk.py); directional casters are a parallel scan over
 every object (``sweep_casters``), since their influence volume is everything, or, over a
 grid of every object, over boxes round runs of its positions first (``sweep_groups``): a
-shadow distance keeps few of them.
+shadow distance keeps few of them. A frame where only a few objects changed keeps each
+list but at those objects, which alone it tests (``changed_casters``, ``sweep_casters``).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .grid import (
     grid_shape,
     group_boxes_of,
     records_grid,
+    records_of,
 )
 from .jit import PRANGE_ONLY
 from .priority import box_d2, spot_cone
@@ -680,19 +682,50 @@ def grid_casters(lights, rows, grid, recs, objects, vols, offsets, out):
 
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def changed_casters(lights, rows, recs, objects, vols):
+    """Casters (DESIGN section 2, "Casters") of the shadowed point and spot lights ``rows``
+    among a few objects, each light testing each of them by ``_caster`` as grid_casters
+    does in a walk, on the calling thread (waking a second costs more than a few objects'
+    tests). lights: PackedLights; rows [T] int64: their packed rows; recs: Records of the
+    objects (grid.records_of, rows ascending); objects: CasterObjects of the store; vols:
+    Volumes indexed like rows. Returns (offsets [T + 1], object rows, caster masks): light
+    t's casters at offsets[t]..offsets[t + 1] - 1, rows ascending."""
+    hot, lf = lights.hot, lights.f
+    box, box_rows = recs.box, recs.rows
+    lo, hi = box[:, 0:3], box[:, 3:6]
+    casts, omask, w_lo, w_hi = objects.casts, objects.mask, objects.lo, objects.hi
+    vn, vq, vm = vols.vn, vols.vq, vols.vm
+    m = box_rows.shape[0]
+    out_rows = np.empty(rows.shape[0] * m, np.int64)
+    out_mask = np.empty(rows.shape[0] * m, np.uint32)
+    offsets = np.zeros(rows.shape[0] + 1, np.int64)
+    n = 0
+    for t in range(rows.shape[0]):
+        j = rows[t]
+        typ = (np.int64(hot[j, 5]) >> 3) & 3
+        for v in range(m):
+            n = _caster(hot, lf, j, typ, np.int64(t), v, box, box_rows, casts, omask, lo, hi,
+                        w_lo, w_hi, vn, vq, vm, out_rows, out_mask, n)
+        offsets[t + 1] = n
+    return offsets, out_rows[:n], out_mask[:n]
+
+
 # --------------------------------------------------------------------------- the casters stage
 
 
 @dataclass(slots=True)
 class Casters:
     """The casters stage's output: caster_offsets, caster_ids and caster_masks of the
-    shadow lights in rank order (DESIGN section 3); ``by_light``: per shadow light row its
+    shadow lights in rank order (DESIGN section 3), ``rows`` the casters' object rows;
+    ``by_light``: per shadow light row its
     (object rows ascending, masks), which the next frame keeps for the lights whose light
     and cameras did not change; ``how``: the plan's entry."""
 
     offsets: np.ndarray
     ids: np.ndarray
     masks: np.ndarray
+    rows: np.ndarray
     by_light: dict[int, tuple[np.ndarray, np.ndarray]]
     how: str
 
@@ -701,20 +734,27 @@ def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights
                  objects: ObjectStore, shadows: ShadowSet, packed: Packed, grid: Grid,
                  cameras: Cameras, visible: np.ndarray, cascade_overlap: float,
                  tuning: Tuning, light_culling: bool = False) -> Casters:
-    """The casters stage. Casters depend on the light, the cameras and every object: with
-    plan.keep_casters, a light none of them changed for keeps its list; when only objects
-    changed (plan.patch_casters), a directional light's list changes only at those
-    objects' rows, which alone it sweeps. ``visible``: the objects' visibility;
+    """The casters stage. Casters depend on the light, the cameras (but for point and spot
+    lights under caster_culling "light") and every object: with plan.keep_casters (or,
+    for point and spot lights, plan.keep_local_casters), a light none of them changed for
+    keeps its list; when only objects changed (plan.patch_casters), its list changes only
+    at those objects' rows, which alone it tests. ``visible``: the objects' visibility;
     ``light_culling``: caster_culling = "light" (point and spot casters get no camera
     test)."""
     shadow_rows = shadows.rows
     recompute = np.ones(shadow_rows.size, np.bool_)
     patch = None
-    if plan.keep_casters:
+    if plan.keep_casters or plan.keep_local_casters:
         changed = np.zeros(len(lights), np.bool_)
         changed[changes.light_rows] = True
-        again = np.array([changed[r] or int(r) not in last.by_light
-                          for r in shadow_rows.tolist()], np.bool_)
+        again = changed[shadow_rows]
+        again |= np.array([int(r) not in last.by_light for r in shadow_rows.tolist()],
+                          np.bool_)
+        if not plan.keep_casters:
+            # The cameras moved: cascades follow them.
+            again |= lights.type[shadow_rows] == DIRECTIONAL
+        if not plan.keep_local_casters:
+            again |= lights.type[shadow_rows] != DIRECTIONAL
         if not plan.patch_casters:
             recompute = again
         else:
@@ -728,7 +768,18 @@ def find_casters(plan: FramePlan, last: Casters | None, changes: Changes, lights
     finder = _Finder(lights, objects, packed.rows, grid, (plan.origin, plan.fast), visible,
                      tuning, light_culling)
     return finder.casters(cameras.frames, cameras.splits, shadow_rows, recompute,
-                          None if last is None else last.by_light, patch, cascade_overlap)
+                          None if last is None else last.by_light, patch, cascade_overlap,
+                          plan.keep_local_casters and not plan.keep_casters)
+
+
+def _merge(rows_c: np.ndarray, masks_c: np.ndarray, changed: np.ndarray, rows_p: np.ndarray,
+           masks_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A kept list (rows_c ascending, masks_c) without the ``changed`` rows (flags by
+    object row), with the changed rows' new casters (rows_p ascending, masks_p, nonzero)
+    in their places."""
+    keep = ~changed[rows_c]
+    at = np.searchsorted(rows_c[keep], rows_p)
+    return np.insert(rows_c[keep], at, rows_p), np.insert(masks_c[keep], at, masks_p)
 
 
 @dataclass
@@ -747,20 +798,24 @@ class _Finder:
 
     def casters(self, frames: CameraFrames, splits: np.ndarray, shadow_rows: np.ndarray,
                 recompute: np.ndarray, cached: dict[int, tuple[np.ndarray, np.ndarray]] | None,
-                patch: tuple[np.ndarray, np.ndarray] | None, overlap: float) -> Casters:
+                patch: tuple[np.ndarray, np.ndarray] | None, overlap: float,
+                cameras_moved: bool = False) -> Casters:
         """Directional lights scan every object against their cascade sweeps (over a grid
         of every object, boxes round SWEEP_GROUP of its positions' objects first); point
         and spot lights walk the light pass's grid, and when it holds the visible objects
         only, a grid of the same kind over the invisible casting objects that meet their
         spheres' bounding box (objects need not be visible to cast). Lights with
         ``recompute`` False take their lists from ``cached``. ``patch`` = (the object rows
-        that changed, per shadow light whether it or the cameras did): a directional light
-        that did not keeps its cached list but at those rows, which alone it sweeps."""
+        that changed, per shadow light whether it or the cameras it depends on did): a
+        light that did not keeps its cached list but at those rows, which alone it tests
+        (a directional light sweeps them, a point or spot light tests each).
+        ``cameras_moved``: the cameras moved (lists kept or patched are point and spot
+        lists under caster_culling "light")."""
         lights, objs = self.lights, self.objects
         n_s = shadow_rows.size
         if n_s == 0:
             return Casters(np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.uint32),
-                           {}, "skipped: no shadow lights")
+                           np.zeros(0, np.int64), {}, "skipped: no shadow lights")
         found: list[tuple[np.ndarray, np.ndarray]] = [None] * n_s  # type: ignore[list-item]
         todo = []
         # A few lights: Python lists, not numpy calls, whose per-call overhead dominates
@@ -771,8 +826,12 @@ class _Finder:
                 todo.append(t)
             else:
                 found[t] = cached[row]  # type: ignore[index]
-        plan = [f"{n_s - len(todo)} kept (light, cameras and objects unchanged)"] \
-            if len(todo) < n_s else []
+        kept = "light and objects unchanged" if cameras_moved else \
+            "light, cameras and objects unchanged"
+        plan = [f"{n_s - len(todo)} kept ({kept})"] if len(todo) < n_s else []
+        if cameras_moved and (len(todo) < n_s or patch is not None):
+            plan.append('caster_culling "light": point and spot lists do not depend on the '
+                        "cameras, which moved")
         if todo:
             rows_t = shadow_rows[todo]
             vols = culling_volumes(lights, rows_t, frames, splits, overlap,
@@ -786,13 +845,19 @@ class _Finder:
             if patched:
                 plan.append(self._patched(rows_t, patched, todo, vols, found, cached, patch[0]))
             local = [i for i, d in enumerate(is_dir) if not d]
+            patched = [] if patch is None else [i for i in local if not patch[1][todo[i]]]
+            local = [i for i in local if i not in patched]
+            if patched:
+                plan.append(self._patched_locals(rows_t, patched, todo, vols, found, cached,
+                                                 patch[0]))
             if local:
                 plan.append(self._locals(rows_t, local, todo, vols, found))
         # (np.cumsum of a short Python list costs more than the list.)
         offsets = np.array(list(accumulate((f[0].size for f in found), initial=0)), np.int64)
-        ids = objs.id[np.concatenate([f[0] for f in found])].astype(np.int32, copy=False)
+        rows = np.concatenate([f[0] for f in found]).astype(np.int64, copy=False)
+        ids = objs.id[rows].astype(np.int32, copy=False)
         masks = np.concatenate([f[1] for f in found]).astype(np.uint32, copy=False)
-        return Casters(offsets, ids, masks, dict(zip(shadow_rows.tolist(), found, strict=True)),
+        return Casters(offsets, ids, masks, rows, dict(zip(shadow_rows.tolist(), found, strict=True)),
                        "; ".join(plan))
 
     def _suns(self, rows_t: np.ndarray, sun: list[int], todo: list[int], vols: Volumes,
@@ -835,14 +900,35 @@ class _Finder:
         changed[rows_p] = True
         for i, t in enumerate(patched):
             rows_c, masks_c = cached[int(rows_t[t])]
-            keep = ~changed[rows_c]
             hit = np.flatnonzero(bits[i])
-            # Both ascending: the new rows go in at their places.
-            at = np.searchsorted(rows_c[keep], rows_p[hit])
-            found[todo[t]] = (np.insert(rows_c[keep], at, rows_p[hit]),
-                              np.insert(masks_c[keep], at, bits[i][hit]))
+            found[todo[t]] = _merge(rows_c, masks_c, changed, rows_p[hit], bits[i][hit])
         return (f"{len(patched)} directional: the {rows_p.size} changed objects against "
                 f"{vm.shape[1]} cascade sweeps, the others' kept")
+
+    def _patched_locals(self, rows_t: np.ndarray, patched: list[int], todo: list[int],
+                        vols: Volumes, found: list, cached: dict, rows_p: np.ndarray) -> str:
+        """The point and spot lights ``patched`` keep their cached lists but at the changed
+        object rows ``rows_p``, each of which they test (changed_casters) on its record made
+        as the light pass's (the same frame), so each gets the bits a full walk gives it."""
+        objs = self.objects
+        rows_l = rows_t[patched].astype(np.int64)
+        if len(patched) < len(todo):
+            vols = Volumes(*(v[patched] for v in vols))
+        changed = np.zeros(len(objs), np.bool_)
+        changed[rows_p] = True
+        recs = records_of(objs.bounds_min, objs.bounds_max, objs.mask,
+                          rows_p.astype(np.int64), self.frame)
+        at, new_rows, new_masks = changed_casters(
+            self.packed, rows_l, recs,
+            CasterObjects(objs.casts_shadows, objs.mask, objs.bounds_min, objs.bounds_max),
+            vols)
+        at = at.tolist()
+        for i, t in enumerate(patched):
+            rows_c, masks_c = cached[int(rows_t[t])]
+            found[todo[t]] = _merge(rows_c, masks_c, changed, new_rows[at[i]:at[i + 1]],
+                                    new_masks[at[i]:at[i + 1]])
+        return (f"{len(patched)} point/spot: the {rows_p.size} changed objects only, the "
+                "others' kept")
 
     def _locals(self, rows_t: np.ndarray, local: list[int], todo: list[int], vols: Volumes,
                 found: list) -> str:

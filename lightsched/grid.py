@@ -208,19 +208,13 @@ def visible_objects(lo, hi, omask, vis_rows, n_small, recs, origin):
     for ch in nb.prange(n_chunks):
         for v in range(ch * OBJECT_CHUNK, min(nv, (ch + 1) * OBJECT_CHUNK)):
             o = vis_rows[v]
-            for a in range(3):
-                vis_box[v, a] = lo[o, a] - origin[a]
-                vis_box[v, 3 + a] = hi[o, a] - origin[a]
-                if v < n_small:
+            write_record(lo, hi, o, omask[o], vis_box, vis_bits, v, origin)
+            if v < n_small:
+                for a in range(3):
                     # From the record as stored (float32 in "fast" precision), as the walk
                     # sees it.
                     half = (np.float64(vis_box[v, 3 + a]) - np.float64(vis_box[v, a])) / 2
                     chunk_ext[ch, a] = max(chunk_ext[ch, a], half)
-            ex = hi[o, 0] - lo[o, 0]
-            ey = hi[o, 1] - lo[o, 1]
-            ez = hi[o, 2] - lo[o, 2]
-            vis_bits[v, 6] = omask[o]
-            vis_box[v, 7] = ex * ex + ey * ey + ez * ez  # read back by float64 records only
     ext = np.zeros(3)
     for ch in range(n_chunks):
         for a in range(3):
@@ -274,16 +268,45 @@ def move_records(lo, hi, rows, shown_mask, grid, recs, pos_of, frame):
         return False
     for r in nb.prange(m):
         o = rows[r]
-        v = pos_of[o]
-        for a in range(3):
-            vis_box[v, a] = lo[o, a] - origin[a]
-            vis_box[v, 3 + a] = hi[o, a] - origin[a]
-        ex = hi[o, 0] - lo[o, 0]
-        ey = hi[o, 1] - lo[o, 1]
-        ez = hi[o, 2] - lo[o, 2]
-        vis_bits[v, 6] = shown_mask[r]
-        vis_box[v, 7] = ex * ex + ey * ey + ez * ez
+        write_record(lo, hi, o, shown_mask[r], vis_box, vis_bits, pos_of[o], origin)
     return True
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def write_record(lo, hi, o, word, vis_box, vis_bits, v, origin):
+    """Record v (of Records' box and bits) = object row o of the bounds lo, hi [N, 3]:
+    (lo - origin, hi - origin, the mask word ``word``, e2 = |hi - lo|^2), float64 or
+    float32 as vis_box is ("fast": relative to the first camera). The one definition
+    visible_objects, move_records and records_of write."""
+    for a in range(3):
+        vis_box[v, a] = lo[o, a] - origin[a]
+        vis_box[v, 3 + a] = hi[o, a] - origin[a]
+    ex = hi[o, 0] - lo[o, 0]
+    ey = hi[o, 1] - lo[o, 1]
+    ez = hi[o, 2] - lo[o, 2]
+    vis_bits[v, 6] = word
+    vis_box[v, 7] = ex * ex + ey * ey + ez * ez  # read back by float64 records only
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _write_records(lo, hi, omask, recs, origin):
+    """recs.box / bits row v = object row recs.rows[v] of the bounds lo, hi [N, 3] and masks
+    omask [N] (write_record: the records DESIGN section 2's tests read), relative to
+    ``origin`` [3]; recs: Records. On the calling thread: for a few objects, where waking
+    a second one costs more than the work."""
+    for v in range(recs.rows.shape[0]):
+        o = recs.rows[v]
+        write_record(lo, hi, o, omask[o], recs.box, recs.bits, v, origin)
+
+
+def records_of(lo: np.ndarray, hi: np.ndarray, omask: np.ndarray, rows: np.ndarray,
+               frame: tuple[np.ndarray, bool]) -> Records:
+    """The records of object ``rows`` (int64) in the frame (origin, single) as a grid's
+    (visible_objects), in the order given, outside any grid."""
+    box = np.empty((rows.size, 8), np.float32 if frame[1] else np.float64)
+    recs = Records(box, box.view(np.uint32 if frame[1] else np.uint64), rows)
+    _write_records(lo, hi, omask, recs, frame[0])
+    return recs
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

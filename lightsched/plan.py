@@ -64,8 +64,12 @@ class FramePlan:
     # those lists (no walk, no scan of the pair cache).
     by_lists: bool = False
     # Shadowed lights whose light and cameras did not change keep their caster lists;
-    # with ``patch_casters``, a kept directional list is patched at the changed objects.
+    # ``keep_local_casters``: point and spot lights whose light did not change do, the
+    # cameras unchanged or, under caster_culling "light", moved (their lists do not
+    # depend on them then); with ``patch_casters``, a kept list is patched at the
+    # changed objects.
     keep_casters: bool = False
+    keep_local_casters: bool = False
     patch_casters: bool = False
 
     @property
@@ -162,6 +166,10 @@ def plan_frame(last: FrameState | None, changes: Changes, cameras: Cameras, cut:
                   and orows is not None and orows.size == 0 and same_origin
                   and n >= tuning.candidate_min_objects)
     keep_casters = last is not None and lrows is not None and not moved
+    # In "fast" precision a point or spot light's test reads records relative to the
+    # origin: its list is kept only while the origin holds.
+    keep_local = (last is not None and lrows is not None and same_origin
+                  and (not moved or config.caster_culling == "light"))
     return FramePlan(
         kind, why, cut=cut, reset_all=frame_index == 0 or cut, cameras_moved=moved,
         origin=origin, same_origin=same_origin, fast=fast, visibility=visibility,
@@ -171,8 +179,9 @@ def plan_frame(last: FrameState | None, changes: Changes, cameras: Cameras, cut:
         candidates=candidates,
         by_lists=(not full and candidates and not moved and config.model == "contribution"
                   and not fast and not config.directional_in_slots),
-        keep_casters=keep_casters,
-        patch_casters=keep_casters and bool(orows.size or changes.cast_rows.size))
+        keep_casters=keep_casters, keep_local_casters=keep_local,
+        patch_casters=(keep_casters or keep_local)
+        and bool(orows.size or changes.cast_rows.size))
 
 
 def _why_full(last: FrameState | None, changes: Changes, cameras: Cameras, frame_index: int,

@@ -1,7 +1,8 @@
 """Shadow views, updates and the atlas (DESIGN section 2) against the oracle alone: a
 renderer replayed frame by frame that draws exactly shadow_update and checks that no view
 left clean is stale; the budget's bound; the atlas' tiles; caster_culling = "light"; the
-sampling rule. tests/test_equivalence.py compares the fast path with the oracle."""
+sampling rule. tests/test_equivalence.py compares the fast path with the oracle; the
+frames here where the fast path patches or keeps its caster lists are compared too."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from helpers import Twin
 
 import lightsched as ls
 import lightsched.reference as ref
@@ -432,3 +434,27 @@ def test_config_accepts():
     for v in (0, 4096, 8192, 65536):
         assert ls.Config(shadow_atlas_size=v).shadow_atlas_size == v
     assert ls.Config(shadow_update_budget=2**31 - 1).shadow_update_budget == 2**31 - 1
+
+
+@pytest.mark.parametrize("culling", ["camera", "light"])
+@pytest.mark.parametrize("seed", range(3))
+def test_patched_and_kept_caster_lists_match_oracle(seed, culling, tuning):
+    """A few objects move each frame, the camera every other frame, the lights never: the
+    fast path patches its point and spot caster lists at the moved objects (a grid of
+    just them) and, under caster_culling "light", keeps them across camera moves. Every
+    frame equals the oracle's, and the plan says which lists were patched or kept."""
+    scene = Scene(seed, n_lights=9, n_objects=80)
+    t = Twin(ls.Config(caster_culling=culling, shadow_budget=6, shadow_update_budget=4),
+             tuning=tuning)
+    scene.install(t)
+    t.frame(scene.cameras())
+    plans = []
+    for i in range(14):
+        scene.step(t, move_objects=0.06, move_lights=0.0, move_camera=i % 2 == 1,
+                   resend=0.02)
+        f, _ = t.frame(scene.cameras())
+        plans.append(f.stats["plan"]["casters"])
+    assert t.compared == t.frames, "a near-tie cut the comparison short"
+    assert any("point/spot: the" in p and "changed objects only" in p for p in plans), plans
+    across = [p for p in plans[1::2] if "do not depend on the cameras" in p]
+    assert bool(across) == (culling == "light"), plans
