@@ -26,7 +26,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import ModuleType
 
 import numpy as np
@@ -106,7 +106,8 @@ def _paths(config: Config) -> None:
     narrow = [Camera(position=corner, forward=np.array([1.0, -0.1, 0.2]),
                      up=np.array([0.0, 1.0, 0.0]), fov_y=0.6, aspect=1.0, near=0.5, far=200.0)]
     # The small city takes the candidate lists' path too (large scenes only, otherwise).
-    s = Scheduler(config, Tuning(candidate_min_objects=0))
+    tuning = Tuning(candidate_min_objects=0)
+    s = Scheduler(config, tuning)
     s.set_lights(**lights)
     s.set_objects(**objects)
     ids = lights["id"]
@@ -121,7 +122,11 @@ def _paths(config: Config) -> None:
         pos[::3, 0] += 4.0 * (jump % 2) if jump > 1 else 0.0
         s.update_lights(id=ids, position=pos)
         s.frame(wide, dt=1 / 60)
-    for cams in (wide, narrow, wide):
+    for n_pass, cams in enumerate((wide, narrow, wide)):
+        # Its incremental frames copy the rows they keep on the calling thread; in the last
+        # pass on every thread (larger scenes do: Tuning.parallel_copy_bytes).
+        s.tuning = replace(tuning, parallel_copy_bytes=0 if n_pass == 2
+                           else tuning.parallel_copy_bytes)
         # Every light moving (full frames: the second and third from candidate lists),
         # then a tenth (incremental frames, until the pair cache is compacted), then
         # nothing (the frame is kept).
