@@ -118,7 +118,7 @@ def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
 def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, residual,
-                k_static):
+                k_static, residual_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
@@ -130,7 +130,8 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
     Residual (residual_gather once a row's slots are written, residual_flush by batches);
-    k_static = a tuple of K zeros if K is in STATIC_K, else (). run: int64 object rows;
+    k_static = a tuple of K zeros if K is in STATIC_K, else (); residual_static = (0,)
+    with the residual on (Config.residual), else () (the rows are written 0). run: int64 object rows;
     visible, reset: bool [N]; live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
@@ -155,12 +156,13 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
         # of a prange body cannot follow it, and a call a row would count the references
         # of its arrays atomically, on lines both threads write.
         _object_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK), objs, seg,
-                      heap, live_id, state, out, params, held_rules, residual, k_static)
+                      heap, live_id, state, out, params, held_rules, residual, k_static,
+                      residual_static)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params, held_rules,
-                  residual, k_static):
+                  residual, k_static, residual_static):
     """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
     how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
     dt/fade_in, fade_in); the others as object_pass's."""
@@ -191,7 +193,12 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
         pool_size = max(pool_size, seg[run[r], 1])
     cf = np.empty((CF_ROWS, pool_size))
     ci = np.empty((CI_ROWS, pool_size), np.int64)
-    batch = residual_batch(pool_size, residual.on)
+    # Off, the residual's code is dead at compile time (the length of the tuple
+    # ``residual_static`` is in its type), so a frame without it runs the pass it had
+    # before the residual. (An empty tuple inside the Residual NamedTuple cannot cross into
+    # the prange.)
+    on = len(residual_static) > 0
+    batch = residual_batch(pool_size, on)
     in_batch = 0
     for r in range(first, end):
         o = run[r]
@@ -284,7 +291,7 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
             if any_shadow and cnt:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
             summed = visible[o] and (cand > cnt or fading)
-        if residual.on and summed:
+        if on and summed:
             if batch.start[in_batch] + seg[o, 1] > batch.keys.shape[0]:
                 in_batch = residual_flush(batch, in_batch, residual)
             in_batch = residual_gather(o, (heap_j, seg[o, 0], seg[o, 0] + seg[o, 1]), k,
@@ -292,15 +299,16 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
             if in_batch == OBJECT_CHUNK:
                 in_batch = residual_flush(batch, in_batch, residual)
         else:
-            residual.residual[o, :] = 0.0
-    residual_flush(batch, in_batch, residual)
+            for c in range(4):
+                residual.residual[o, c] = 0.0
+    if on:
+        residual_flush(batch, in_batch, residual)
 
 
 class Residual(NamedTuple):
     """What the object pass reads for the residual, and where it writes it (DESIGN section
     2, "Residual")."""
 
-    on: bool                 # Config.residual (off: the rows are written 0)
     res_id: np.ndarray       # int32 [L]: per light row its id if it counts, else -2
     hot: np.ndarray          # float64 [L, 8]: priority.PackedLights.hot
     lf: np.ndarray           # float64 [L, 8]: priority.PackedLights.f
@@ -478,7 +486,8 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
             {name: getattr(last.frame, name) for name in WRITTEN},
             None if plan.full else run, last.visibility.objects)
     out["visible"] = visible
-    selected_before = objects.get("selected")[run]
+    # (np.take: a 2-d array indexed by rows with [] copies row by row, ~10x slower.)
+    selected_before = np.take(objects.get("selected"), run, axis=0)
     if run.size:
         reset = objects.is_new | ~objects.get("was_visible")
         if plan.reset_all:
@@ -495,10 +504,10 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
         object_pass(run, (read_only_view(visible), reset), cache.seg, cache.heap, live_id,
                     state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
-                    Residual(bool(config.residual), res_id, packed.rows.hot, packed.rows.f,
+                    Residual(res_id, packed.rows.hot, packed.rows.f,
                              objects.bounds_min, objects.bounds_max, packed.origin,
                              out["residual"]),
-                    (0,) * k if k in STATIC_K else ())
+                    (0,) * k if k in STATIC_K else (), (0,) if config.residual else ())
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])
     objects.put("was_visible", visible)

@@ -682,6 +682,19 @@ def update_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
     lights whose views are all ready, and with unshadowed = "skip" a shadow light with a
     view not ready lights nothing. The rules are view_pass'."""
     ids_cam = camera_ids(cameras)
+    if shadows.rows.size == 0 and (last is None or (last.memory.key.shape[0] == 0
+                                                    and not last.tiles)):
+        if last is not None and last.placement is None and np.array_equal(last.camera_ids,
+                                                                          ids_cam):
+            return last, shadows
+        return _no_views(ids_cam, cams.splits.shape[1]), shadows
+    return run_views(last, shadows, casters, lights, objects, cams, cameras, ids_cam, config)
+
+
+def run_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
+              lights: LightStore, objects: ObjectStore, cams: Cameras, cameras: list[Camera],
+              ids_cam: np.ndarray, config: Config) -> tuple[ShadowViews, ShadowSet]:
+    """update_views' general case: the atlas tiles, then view_pass."""
     types = lights.type[shadows.rows]
     tiles, rect, moved = _tiles(last, shadows, types, config.shadow_atlas_size)
     cam_state = _camera_states(cameras, cams)
@@ -705,6 +718,17 @@ def update_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
                       _placement(shadows, types), not res.dirty.any(), moved or 0, res.texels,
                       _how(n_s, int(np.count_nonzero(res.dirty)), res.drawn, moved))
     return out, sampled(shadows, res.ready, lights, config)
+
+
+def _no_views(ids_cam: np.ndarray, splits: int) -> ShadowViews:
+    """What the views stage gives with no shadow light and no view or tile remembered (as
+    view_pass would, without its fixed cost: a scene without shadows pays nothing here).
+    Its placement is None (no other output has), so that the next such frame with the same
+    cameras may share it."""
+    return ShadowViews(
+        np.zeros(0, np.uint32), np.zeros(0, np.uint32), np.zeros(0, np.uint32),
+        np.zeros(0, np.uint32), np.zeros((0, 6, 3), np.int32), ids_cam, np.zeros(0, np.bool_),
+        empty_memory(N_CAMERA + splits), {}, None, True, 0, 0, _how(0, 0, 0, None))
 
 
 def _how(n_s: int, dirty_lights: int, drawn: int, moved: int | None) -> str:
@@ -735,4 +759,4 @@ def sampled(shadows: ShadowSet, ready: np.ndarray, lights: LightStore, config: C
 
 __all__ = ["MIN_TIER", "NamedIds", "ShadowViews", "ViewCameras", "ViewCasters", "ViewLights",
            "ViewMemory", "ViewObjects", "ViewPass", "allocate_tiles", "camera_ids",
-           "empty_memory", "first_fit", "sampled", "update_views", "view_pass"]
+           "empty_memory", "first_fit", "run_views", "sampled", "update_views", "view_pass"]

@@ -1,8 +1,9 @@
 """Every kernel signature a frame can call, made ready before the first frame needs it.
 
 Takes: the K values and precisions to prepare (by default every compiled variant: K in
-objects.STATIC_K and one other K, exact and fast). Returns: a ``WarmUp`` summary (seconds,
-kernel signatures loaded from numba's cache and compiled).
+objects.STATIC_K and one other K, exact and fast; each with the residual on and off).
+Returns: a ``WarmUp`` summary (seconds, kernel signatures loaded from numba's cache and
+compiled).
 
 numba compiles a kernel for each new signature on its first call and keeps the machine
 code in its cache (``__pycache__`` beside the sources). A frame is the first call of ~30
@@ -83,13 +84,16 @@ def cache_counts(package: ModuleType | None = None) -> tuple[int, int]:
 def warm_up(max_lights: Iterable[int] | None = None,
             precisions: Sequence[str] = ("exact", "fast")) -> WarmUp:
     """Steps a small city through every frame path for each K in ``max_lights`` (default
-    STATIC_K and GENERIC_K) and each precision, so that later frames of any scene with
-    those settings load or compile nothing. Leaves no state behind but numba's."""
+    STATIC_K and GENERIC_K), each precision and the residual on and off, so that later
+    frames of any scene with those settings load or compile nothing. Leaves no state
+    behind but numba's."""
     t = time.perf_counter()
     before = cache_counts()
     for k in (*STATIC_K, GENERIC_K) if max_lights is None else max_lights:
         for precision in precisions:
-            _paths(Config(max_lights=int(k), precision=precision))
+            # The residual on and off: the object pass is compiled for each (objects.py).
+            for residual in (True, False):
+                _paths(Config(max_lights=int(k), precision=precision, residual=residual))
     after = cache_counts()
     return WarmUp(time.perf_counter() - t, after[0] - before[0], after[1] - before[1])
 

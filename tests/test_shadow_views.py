@@ -458,3 +458,32 @@ def test_patched_and_kept_caster_lists_match_oracle(seed, culling, tuning):
     assert any("point/spot: the" in p and "changed objects only" in p for p in plans), plans
     across = [p for p in plans[1::2] if "do not depend on the cameras" in p]
     assert bool(across) == (culling == "light"), plans
+
+
+def test_no_shadow_light_skips_the_view_pass_with_its_result():
+    """With no shadow light and no view remembered the views stage skips view_pass: what it
+    gives instead is what the pass gives (run_views, the general case, on the same frame)."""
+    from lightsched.shadow_views import camera_ids, run_views
+
+    scene = Scene(3)
+    scene.lights["shadows"] = np.zeros(scene.n_lights, bool)
+    s = ls.Scheduler()
+    scene.install(s)
+    for _ in range(3):
+        cams = [cam(scene.camera, cid=5), cam(scene.camera + 1.0)]
+        frame = s.frame(cams, dt=0.016)
+        last = s._last
+        assert last is not None and frame.stats["plan"]["views"] == "skipped: no shadow lights"
+        quick = last.views
+        general, seen = run_views(None, last.shadows, last.casters, s.lights, s.objects,
+                                  last.cameras, cams, camera_ids(cams), s.config)
+        assert seen is last.shadows
+        for field in ("views", "dirty", "static_dirty", "update", "rect", "camera_ids",
+                      "ready"):
+            a, b = getattr(quick, field), getattr(general, field)
+            assert a.dtype == b.dtype and np.array_equal(a, b), field
+        for a, b in zip(quick.memory, general.memory, strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape
+        assert (quick.tiles, quick.quiet, quick.tiles_moved, quick.texels, quick.how) == (
+            general.tiles, general.quiet, general.tiles_moved, general.texels, general.how)
+        scene.step(s)

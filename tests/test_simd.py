@@ -220,7 +220,7 @@ def residual_arguments(rng, n, live_id):
     hot[:, 6] = rng.uniform(1, 10, n_l)
     lo = rng.uniform(-4, 4, (n, 3))
     res_id = np.where(np.arange(n_l) % 2 == 0, live_id, -2).astype(np.int32)
-    return Residual(True, res_id, hot, np.zeros((n_l, 8)), lo, lo + rng.uniform(0, 2, (n, 3)),
+    return Residual(res_id, hot, np.zeros((n_l, 8)), lo, lo + rng.uniform(0, 2, (n, 3)),
                     np.zeros(3), np.full((n, 4), -9.0, np.float32))
 
 
@@ -242,9 +242,9 @@ def check_held(case, kinds, packings):
     strided[:] = heap.p
     want = copy.deepcopy((state, out, residual))
     object_pass(run, objs, seg, PairHeap(strided, heap.light_row), live_id, *want[:2], params,
-                shadow, want[2], k_static)
+                shadow, want[2], k_static, (0,))
     got = copy.deepcopy((state, out, residual))
-    object_pass(run, objs, seg, heap, live_id, *got[:2], params, shadow, got[2], k_static)
+    object_pass(run, objs, seg, heap, live_id, *got[:2], params, shadow, got[2], k_static, (0,))
     for w, g in zip(want[0] + want[1] + (want[2].residual,),
                     got[0] + got[1] + (got[2].residual,), strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
@@ -731,7 +731,7 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     # The residual of held objects (their rows written after held_row) is among what
     # check_held compared: some have lights past K or fading slots, and so a residual.
     args = copy.deepcopy(case)
-    object_pass(*args)
+    object_pass(*args, (0,))
     held = np.array([kind in ("held", "fading") for kind in kinds]) & (case[2][:, 1] <= 16)
     assert (args[9].residual[held, 0] > 0).sum() >= 10
     seg = case[2]

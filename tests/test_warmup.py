@@ -24,6 +24,8 @@ from lightsched.warmup import GENERIC_K, WarmUp, kernels, warm_up
 CONFIGS = [
     ls.Config(),
     *(ls.Config(max_lights=k) for k in (1, 2, 3, 4, 16)),
+    ls.Config(residual=False),
+    ls.Config(residual=False, max_lights=GENERIC_K + 1, precision="fast"),
     ls.Config(precision="fast"),
     ls.Config(precision="fast", max_lights=4),
     ls.Config(precision="fast", max_lights=GENERIC_K + 1),
