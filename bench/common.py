@@ -77,6 +77,9 @@ def machine() -> dict[str, str]:
         nproc = str(os.cpu_count())
     import numba
 
+    if os.environ.get("NUMBA_CPU_NAME"):
+        # A forced target (the AVX2 path measured on an AVX-512 host) is part of the CPU.
+        cpu += f" (numba target forced: {os.environ['NUMBA_CPU_NAME']})"
     return {"cpu": cpu, "nproc": nproc, "python": platform.python_version(),
             "numpy": np.__version__, "numba": numba.__version__,
             "numba_threads": str(numba.get_num_threads()),
