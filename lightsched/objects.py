@@ -131,8 +131,8 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
     Residual (residual_gather once a row's slots are written, residual_flush by batches);
     k_static = a tuple of K zeros if K is in STATIC_K, else (); residual_static = (0,)
-    with the residual on (Config.residual), else () (the rows are written 0). run: int64 object rows;
-    visible, reset: bool [N]; live_id: int32 [L].
+    with the residual on (Config.residual), else () (the rows are written 0). run: int64
+    object rows; visible, reset: bool [N]; live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
     "Residual"; section 3 (the per-object outputs and their empty slots); section 6 (only
@@ -333,7 +333,7 @@ class ResidualBatch(NamedTuple):
 @nb.njit(cache=True, nogil=True)
 def residual_batch(pool_size, on):
     """An empty ResidualBatch that holds at least one object of ``pool_size`` pairs, or
-    with the residual off (``on`` False) none: a chunk then allocates nothing for it."""
+    with the residual off (``on`` False) one of empty arrays."""
     cap = max(pool_size, RESIDUAL_TERMS) if on else 0
     n = OBJECT_CHUNK if on else 0
     return ResidualBatch(np.empty(n, np.int64), np.zeros(n + 1, np.int64),
