@@ -47,6 +47,16 @@ class Buffers:
             self._named[name] = buf
         return buf
 
+    def zeros(self, name: str, shape: tuple[int, ...], dtype: Any) -> np.ndarray:
+        """A read-only array of zeros, kept while its shape and dtype are: an output that
+        is all zeros in a frame (the residual with Config.residual off) costs no write."""
+        buf = self._named.get(name)
+        if buf is None or buf.shape != shape or buf.dtype != dtype or buf.flags.writeable:
+            buf = np.zeros(shape, dtype)
+            buf.setflags(write=False)
+            self._named[name] = buf
+        return buf
+
     def rows(self, n: int, read_only: bool = True) -> np.ndarray:
         """0..n-1 (int64), kept while n is; a read-only view unless asked otherwise (the
         object pass's rows have the type of an incremental frame's: one signature)."""

@@ -65,6 +65,8 @@ if TYPE_CHECKING:
 STATIC_K = (4, 8)            # K values the object pass is compiled for (8 is the default)
 SORT_FEW = 16                # residual_gather sorts more lights than this with numpy's sort
 RESIDUAL_TERMS = 4096        # a ResidualBatch's terms (more when one object has more pairs)
+# Residual.residual with the residual off: the pass writes none (of the type it has on).
+_NO_RESIDUAL = np.zeros((0, 4), np.float32)
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
@@ -117,7 +119,7 @@ def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, residual,
+def object_pass(run, objs, seg, longest, heap, live_id, state, out, params, shadow, residual,
                 k_static, residual_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
@@ -125,13 +127,14 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
 
     objs = (visible, reset): reset marks objects that start with their selected lights on
     (step 3 of Fade); seg [N, 2] (start, length) of each object's pairs in ``heap``
-    (group.PairHeap): the pair cache; live_id = per light
+    (group.PairHeap): the pair cache; longest: at least the longest segment
+    (PairCache.longest: each chunk's pools take that many lights); live_id = per light
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
     Residual (residual_gather once a row's slots are written, residual_flush by batches);
     k_static = a tuple of K zeros if K is in STATIC_K, else (); residual_static = (0,)
-    with the residual on (Config.residual), else () (the rows are written 0). run: int64
+    with the residual on (Config.residual), else () (no residual is written). run: int64
     object rows; visible, reset: bool [N]; live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
@@ -156,13 +159,13 @@ def object_pass(run, objs, seg, heap, live_id, state, out, params, shadow, resid
         # of a prange body cannot follow it, and a call a row would count the references
         # of its arrays atomically, on lines both threads write.
         _object_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK), objs, seg,
-                      heap, live_id, state, out, params, held_rules, residual, k_static,
-                      residual_static)
+                      longest, heap, live_id, state, out, params, held_rules, residual,
+                      k_static, residual_static)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params, held_rules,
-                  residual, k_static, residual_static):
+def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, out, params,
+                  held_rules, residual, k_static, residual_static):
     """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
     how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
     dt/fade_in, fade_in); the others as object_pass's."""
@@ -188,9 +191,7 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
     k = len(k_static) if len(k_static) else s_id.shape[1]
     sf = np.empty((F_ROWS, k))
     si = np.empty((I_ROWS, k), np.int64)
-    pool_size = k + 1
-    for r in range(first, end):
-        pool_size = max(pool_size, seg[run[r], 1])
+    pool_size = max(k + 1, longest)
     cf = np.empty((CF_ROWS, pool_size))
     ci = np.empty((CI_ROWS, pool_size), np.int64)
     # Off, the residual's code is dead at compile time (the length of the tuple
@@ -298,7 +299,7 @@ def _object_chunk(run, first, end, objs, seg, heap, live_id, state, out, params,
                                        (o_index, s_w), residual, batch, in_batch)
             if in_batch == OBJECT_CHUNK:
                 in_batch = residual_flush(batch, in_batch, residual)
-        else:
+        elif on:
             for c in range(4):
                 residual.residual[o, c] = 0.0
     if on:
@@ -465,8 +466,12 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
     rows already. ``renumbered``: the object rows are not last frame's."""
     n, k = len(objects), config.max_lights
     run, how = cache.run, ""
+    # With the residual off every row of it is 0: the frame gets a read-only array of zeros
+    # kept from frame to frame, and the pass writes none. (Buffers holds that array, so a
+    # frame's outputs that include it are never taken back to be written.)
+    names = WRITTEN if config.residual else PASS_WRITTEN
     if plan.full:
-        out, out_vis = _outputs(last, None, n, k, tuning, buffers)
+        out, out_vis = _outputs(last, None, n, k, names, tuning, buffers)
         fading = np.empty(n, np.bool_)
         if out_vis is not None and last is not None and not renumbered:
             run = run_rows((visible, last.visibility.objects, out_vis), buffers)
@@ -475,17 +480,20 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                 how = (f"; {n - run.size} objects out of view keep their empty rows (and in "
                        "the two frames before)")
     elif run.size:
-        out = _outputs(last, run, n, k, tuning, buffers)[0]
+        out = _outputs(last, run, n, k, names, tuning, buffers)[0]
         fading = last.outputs.fading.copy()
     else:
-        out = {name: getattr(last.frame, name) for name in WRITTEN}
+        out = {name: getattr(last.frame, name) for name in names}
         fading = last.outputs.fading
     if last is not None and run.size:
         # The last frame's arrays lag this frame's by the rows this frame recomputes.
         buffers.spare_outputs = SpareOutputs(
-            {name: getattr(last.frame, name) for name in WRITTEN},
+            {name: getattr(last.frame, name) for name in names},
             None if plan.full else run, last.visibility.objects)
     out["visible"] = visible
+    if not config.residual:
+        out["residual"] = buffers.zeros("residual zeros", field_shape("residual", n, k),
+                                        np.float32)
     # (np.take: a 2-d array indexed by rows with [] copies row by row, ~10x slower.)
     selected_before = np.take(objects.get("selected"), run, axis=0)
     if run.size:
@@ -501,12 +509,12 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
         live_id = live_ids(lights.id, shadows.live, buffers.scratch("live_id", n_l, np.int32)[:n_l])
         res_id = residual_ids(live_id, lights.shadows, config.unshadowed == "skip",
                               buffers.scratch("res_id", n_l, np.int32)[:n_l])
-        object_pass(run, (read_only_view(visible), reset), cache.seg, cache.heap, live_id,
-                    state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
+        object_pass(run, (read_only_view(visible), reset), cache.seg, cache.longest, cache.heap,
+                    live_id, state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     Residual(res_id, packed.rows.hot, packed.rows.f,
                              objects.bounds_min, objects.bounds_max, packed.origin,
-                             out["residual"]),
+                             out["residual"] if config.residual else _NO_RESIDUAL),
                     (0,) * k if k in STATIC_K else (), (0,) if config.residual else ())
     objects.put("slot_light", out["light_ids"])
     objects.put("slot_state", out["fade_state"])
@@ -515,9 +523,10 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
 
 
 def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int,
-             tuning: Tuning, buffers: Buffers) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
-    """Arrays for this frame's per-object outputs (WRITTEN): every row is written when
-    ``written`` is None (a full frame), else only those rows are, the others must be the
+             names: tuple[str, ...], tuning: Tuning, buffers: Buffers
+             ) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """Arrays for this frame's per-object outputs ``names`` (of WRITTEN): every row is
+    written when ``written`` is None (a full frame), else only those rows are, the others must be the
     last frame's. The arrays of the frame before the last are taken back when nothing
     outside holds them any more (a steady scene allocates no output memory) and brought
     up to date with the rows the last frame changed and this one does not write; else new
@@ -526,7 +535,7 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
     rows are empty), else None."""
     spare, buffers.spare_outputs = buffers.spare_outputs, None
     if (spare is not None and spare.arrays["light_ids"].shape == (n, k)
-            and not held_elsewhere(spare.arrays)):
+            and tuple(spare.arrays) == names and not held_elsewhere(spare.arrays)):
         for arr in spare.arrays.values():
             arr.setflags(write=True)
         if written is not None:
@@ -549,8 +558,8 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
         return spare.arrays, spare.visible if spare.visible.shape == (n,) else None
     if written is None:
         return {name: np.empty(field_shape(name, n, k), PER_OBJECT[name][0])
-                for name in WRITTEN}, None
-    return {name: getattr(last.frame, name).copy() for name in WRITTEN}, None
+                for name in names}, None
+    return {name: getattr(last.frame, name).copy() for name in names}, None
 
 
 def run_rows(vis: tuple[np.ndarray, np.ndarray, np.ndarray], buffers: Buffers) -> np.ndarray:

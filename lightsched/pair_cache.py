@@ -184,13 +184,15 @@ _NO_ROWS = np.zeros(0, np.int64)
 class PairCache:
     """The lists stage's output, kept for the next frame: per object row ``seg`` (start,
     length) of its pairs in ``heap`` (group.PairHeap), ``used`` the heap records
-    in use (live or garbage), ``pairs`` the live ones (the lengths in seg summed). Also
+    in use (live or garbage), ``pairs`` the live ones (the lengths in seg summed),
+    ``longest`` at least the longest segment (the object pass sizes its pools by it). Also
     this frame's ``run``: the object rows the object pass recomputes, and ``how``."""
 
     seg: np.ndarray
     heap: PairHeap
     used: int
     pairs: int
+    longest: int
     run: np.ndarray
     how: str
 
@@ -210,7 +212,7 @@ def update_pair_cache(plan: FramePlan, last: FrameState | None, pairs: Pairs,
         seg = np.empty((n, 2), np.int64)
         seg[:, 0] = start[:-1]
         np.subtract(start[1:], start[:-1], out=seg[:, 1])
-        cache = PairCache(seg, heap, int(start[-1]), int(start[-1]),
+        cache = PairCache(seg, heap, int(start[-1]), int(start[-1]), longest(seg),
                           buffers.rows(n, read_only=False), "grouped by object (every pair new)")
     elif pairs.path == LISTS:
         cache = _from_lists(plan, last, pairs, shadows, vis, packed, buffers)
@@ -220,6 +222,15 @@ def update_pair_cache(plan: FramePlan, last: FrameState | None, pairs: Pairs,
     if last is not None and last.cache.heap.p is not cache.heap.p:
         buffers.spare_heap = last.cache.heap
     return cache
+
+
+def longest(seg: np.ndarray, rows: np.ndarray | None = None, bound: int = 0) -> int:
+    """PairCache.longest: the longest of the segments ``seg`` (at ``rows``; None: all),
+    or ``bound`` if longer. An incremental frame bounds its cache by last frame's bound
+    and the lists it rewrote (a bound that only shrinks at a full frame), so the object
+    pass need not scan its rows' lengths."""
+    lengths = seg[:, 1] if rows is None else seg[rows, 1]
+    return max(bound, int(lengths.max(initial=0)))
 
 
 def _from_candidates(pairs: Pairs, packed: Packed, n: int, buffers: Buffers) -> PairCache:
@@ -239,7 +250,8 @@ def _from_candidates(pairs: Pairs, packed: Packed, n: int, buffers: Buffers) -> 
         buffers.spare_heap = heap
         heap = buffers.new_heap(int(used))
         used, n_pairs, _ = candidate_pairs(*args, seg, heap, 0)
-    return PairCache(seg, heap, int(used), int(n_pairs), buffers.rows(n, read_only=False),
+    return PairCache(seg, heap, int(used), int(n_pairs), longest(seg),
+                     buffers.rows(n, read_only=False),
                      "every pair from the objects' candidate lists, by object row")
 
 
@@ -274,7 +286,7 @@ def _from_lists(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: Shadow
         # fit, or would leave the heap mostly garbage): that frame then writes into room
         # it knows it has, without a failed try.
         seg, heap, used = _room(buffers, seg, heap, used, n_pairs, need)
-    return PairCache(seg, heap, used, n_pairs, run,
+    return PairCache(seg, heap, used, n_pairs, longest(seg, rows, c.longest), run,
                      f"cache kept; the lists of {rows.size} objects made again from their "
                      f"candidates; {run.size} of {np.count_nonzero(vis.objects)} visible "
                      "objects recomputed (in reach of changed lights or of lights whose "
@@ -354,7 +366,8 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
                              w_start, w_pairs, used))
     used = int(replace_lists(rows1, mode1, seg, heap, walked, kept, o_start, o_pairs, used))
     n_pairs += sum(int(seg[rows, 1].sum()) for rows in rewritten)
-    return PairCache(seg, heap, used, n_pairs, run,
+    bound = longest(seg, rows1, longest(seg, rows2, c.longest))
+    return PairCache(seg, heap, used, n_pairs, bound, run,
                      f"cache kept; {scanned}; {run.size} of {np.count_nonzero(vis.objects)} "
                      "visible objects recomputed (pairs of changed lights, moved or newly "
                      "visible objects, shadow-map changes, fading slots"

@@ -397,11 +397,12 @@ def test_incremental_city_is_bit_identical_to_full_frames(seed, precision, tunin
 
 
 def _check_counts(s: ls.Scheduler, f: ls.Frame) -> None:
-    """The frame's pair count is its cache's (kept as a count, summed here), and the
-    objects' and the lights' candidate lists hold as many candidates (a full frame sizes
-    its pair heap from the lights')."""
+    """The frame's pair count is its cache's (kept as a count, summed here), its bound on
+    the longest list holds, and the objects' and the lights' candidate lists hold as many
+    candidates (a full frame sizes its pair heap from the lights')."""
     c, cands = s._last.cache, s._last.pairs.candidates
     assert f.stats["counts"]["pairs"] == c.pairs == int(c.seg[:, 1].sum())
+    assert c.longest >= int(c.seg[:, 1].max(initial=0))
     if cands is not None:
         assert int(cands.lists[0][:, 1].sum()) == int(cands.by_light[0][:, 1].sum())
 

@@ -151,3 +151,24 @@ def test_residual_off_and_invisible_objects_are_zero(sched_cls):
     assert not f.residual.any()
     s.update_lights(id=[2], position=[[0.0, 1.0, 3.0]])
     assert not s.frame([CAM], dt=0.1).residual.any()
+
+
+def test_residual_switched_off_and_on_between_frames(sched_cls):
+    """Off, every frame's residual is zero (the fast path's frames share one read-only
+    array of zeros, which the pass never writes); switched on again, the lit object's
+    residual comes back, and the frames made while it was off still read zero."""
+    lights = _lights(id=[1, 2], position=[[0.0, 0.0, 1.0], [0.0, 0.0, 3.0]],
+                     radius=[10.0, 10.0], intensity=[10.0, 1.0])
+    s, f = _frame(sched_cls, ls.Config(max_lights=1), lights, _box([0, 0, 0], [0, 0, 0]))
+    assert f.residual[0, 0] > 0
+    off_frames = []
+    for i, on in enumerate((True, False, False, False, True, True, True, False, True)):
+        s.config = ls.Config(max_lights=1, residual=on)
+        s.update_lights(id=[2], position=[[0.0, 0.1 * i, 3.0]])
+        f = s.frame([CAM], dt=0.1)
+        assert (f.residual[0, 0] > 0) == on
+        assert not f.residual[0, 1:].any() or on
+        if not on:
+            off_frames.append(f)
+        del f
+    assert all(not g.residual.any() for g in off_frames)
