@@ -38,6 +38,8 @@ class Buffers:
         self.spare_outputs: SpareOutputs | None = None
         self.kept_run: tuple[tuple[np.ndarray, ...], np.ndarray] | None = None
         self.hidden: tuple[np.ndarray, ...] | None = None
+        # Which of two buffers in turn the objects stage keeps the replaced selection in.
+        self.turn = 0
 
     def scratch(self, name: str, size: int, dtype: Any) -> np.ndarray:
         """A reusable 1-d buffer of at least ``size`` elements (grown by half when short)."""

@@ -119,8 +119,8 @@ def live_ids(ids: np.ndarray, live: np.ndarray, out: np.ndarray | None = None) -
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def object_pass(run, objs, seg, longest, heap, live_id, state, out, params, shadow, residual,
-                k_static, residual_static):
+def object_pass(run, objs, seg, longest, heap, live_id, state, selected_before, out, params,
+                shadow, residual, k_static, residual_static):
     """For the object rows ``run`` (ascending, parallel in chunks): top-K with hysteresis,
     fade, outputs; rows not in ``run`` are left as they are (an incremental frame has
     copied them from the last frame).
@@ -131,10 +131,13 @@ def object_pass(run, objs, seg, longest, heap, live_id, state, out, params, shad
     (PairCache.longest: each chunk's pools take that many lights); live_id = per light
     row its id if it is live (visible, and not removed by unshadowed = "skip"), else -2
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
-    SlotState; out: ObjectOutputs; params: FadeParams; shadow: SlotShadows; residual:
-    Residual (residual_gather once a row's slots are written, residual_flush by batches);
-    k_static = a tuple of K zeros if K is in STATIC_K, else (); residual_static = (0,)
-    with the residual on (Config.residual), else () (no residual is written). run: int64
+    SlotState; selected_before: int32 [run.size, K], where the pass keeps each row's
+    state.selected as it was before the pass (for explain; kept as the row is read, where
+    a copy apart cost a pass over memory); out: ObjectOutputs; params: FadeParams;
+    shadow: SlotShadows; residual: Residual (residual_gather once a row's slots are
+    written, residual_flush by batches); k_static = a tuple of K zeros if K is in
+    STATIC_K, else (); residual_static = (0,) with the residual on (Config.residual), else
+    () (no residual is written). run: int64
     object rows; visible, reset: bool [N]; live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
@@ -159,13 +162,13 @@ def object_pass(run, objs, seg, longest, heap, live_id, state, out, params, shad
         # of a prange body cannot follow it, and a call a row would count the references
         # of its arrays atomically, on lines both threads write.
         _object_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK), objs, seg,
-                      longest, heap, live_id, state, out, params, held_rules, residual,
-                      k_static, residual_static)
+                      longest, heap, live_id, state, selected_before, out, params, held_rules,
+                      residual, k_static, residual_static)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, out, params,
-                  held_rules, residual, k_static, residual_static):
+def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, selected_before,
+                  out, params, held_rules, residual, k_static, residual_static):
     """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
     how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
     dt/fade_in, fade_in); the others as object_pass's."""
@@ -203,6 +206,8 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, out
     in_batch = 0
     for r in range(first, end):
         o = run[r]
+        for m in range(k):
+            selected_before[r, m] = s_sel[o, m]
         cand = -1
         if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
             # The common case in vector code: slots held in last frame's order.
@@ -494,8 +499,10 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
     if not config.residual:
         out["residual"] = buffers.zeros("residual zeros", field_shape("residual", n, k),
                                         np.float32)
-    # (np.take: a 2-d array indexed by rows with [] copies row by row, ~10x slower.)
-    selected_before = np.take(objects.get("selected"), run, axis=0)
+    # Two buffers in turn: a frame that fails leaves explain the last one's.
+    buffers.turn ^= 1
+    selected_before = buffers.scratch(f"selected before {buffers.turn}", run.size * k,
+                                      np.int32)[:run.size * k].reshape(run.size, k)
     if run.size:
         reset = objects.is_new | ~objects.get("was_visible")
         if plan.reset_all:
@@ -510,7 +517,8 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
         res_id = residual_ids(live_id, lights.shadows, config.unshadowed == "skip",
                               buffers.scratch("res_id", n_l, np.int32)[:n_l])
         object_pass(run, (read_only_view(visible), reset), cache.seg, cache.longest, cache.heap,
-                    live_id, state, ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
+                    live_id, state, selected_before,
+                    ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     Residual(res_id, packed.rows.hot, packed.rows.f,
                              objects.bounds_min, objects.bounds_max, packed.origin,

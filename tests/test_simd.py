@@ -241,12 +241,16 @@ def check_held(case, kinds, packings):
     strided = np.zeros(2 * heap.p.size)[::2]
     strided[:] = heap.p
     longest = int(seg[:, 1].max(initial=0))
+    before = np.full((2, run.size, simd.LANES), -9, np.int32)
     want = copy.deepcopy((state, out, residual))
-    object_pass(run, objs, seg, longest, PairHeap(strided, heap.light_row), live_id, *want[:2],
-                params, shadow, want[2], k_static, (0,))
+    object_pass(run, objs, seg, longest, PairHeap(strided, heap.light_row), live_id, want[0],
+                before[0], want[1], params, shadow, want[2], k_static, (0,))
     got = copy.deepcopy((state, out, residual))
-    object_pass(run, objs, seg, longest, heap, live_id, *got[:2], params, shadow, got[2],
-                k_static, (0,))
+    object_pass(run, objs, seg, longest, heap, live_id, got[0], before[1], got[1], params,
+                shadow, got[2], k_static, (0,))
+    # Each path keeps every row's selection as it was before the pass.
+    assert np.array_equal(before[0], state.selected[run])
+    assert np.array_equal(before[1], state.selected[run])
     for w, g in zip(want[0] + want[1] + (want[2].residual,),
                     got[0] + got[1] + (got[2].residual,), strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
@@ -733,7 +737,8 @@ def test_held_row_takes_the_held_objects_of_a_crowd():
     # The residual of held objects (their rows written after held_row) is among what
     # check_held compared: some have lights past K or fading slots, and so a residual.
     args = copy.deepcopy(case)
-    object_pass(*args[:3], int(args[2][:, 1].max()), *args[3:], (0,))
+    object_pass(*args[:3], int(args[2][:, 1].max()), *args[3:6],
+                np.empty((args[0].size, simd.LANES), np.int32), *args[6:], (0,))
     held = np.array([kind in ("held", "fading") for kind in kinds]) & (case[2][:, 1] <= 16)
     assert (args[9].residual[held, 0] > 0).sum() >= 10
     seg = case[2]
