@@ -297,6 +297,7 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
             if any_shadow and cnt:
                 pick_slot_shadows(sf, si, cnt, shadow_of_row, max_shadowed, o_shadow, o)
             summed = visible[o] and (cand > cnt or fading)
+        # (Off, no row is written: the frame's residual is Buffers' array of zeros.)
         if on and summed:
             if batch.start[in_batch] + seg[o, 1] > batch.keys.shape[0]:
                 in_batch = residual_flush(batch, in_batch, residual)
@@ -534,13 +535,13 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
              names: tuple[str, ...], tuning: Tuning, buffers: Buffers
              ) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """Arrays for this frame's per-object outputs ``names`` (of WRITTEN): every row is
-    written when ``written`` is None (a full frame), else only those rows are, the others must be the
-    last frame's. The arrays of the frame before the last are taken back when nothing
-    outside holds them any more (a steady scene allocates no output memory) and brought
-    up to date with the rows the last frame changed and this one does not write; else new
-    arrays (copies of the last frame's for an incremental frame). Also, for a full frame
-    that takes them back, the visibility of the frame they held (its invisible objects'
-    rows are empty), else None."""
+    written when ``written`` is None (a full frame), else only those rows are, the others
+    must be the last frame's. The arrays of the frame before the last are taken back when
+    they are the same names and nothing outside holds them any more (a steady scene
+    allocates no output memory) and brought up to date with the rows the last frame
+    changed and this one does not write; else new arrays (copies of the last frame's for
+    an incremental frame). Also, for a full frame that takes them back, the visibility of
+    the frame they held (its invisible objects' rows are empty), else None."""
     spare, buffers.spare_outputs = buffers.spare_outputs, None
     if (spare is not None and spare.arrays["light_ids"].shape == (n, k)
             and tuple(spare.arrays) == names and not held_elsewhere(spare.arrays)):
