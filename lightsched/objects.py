@@ -137,8 +137,8 @@ def object_pass(run, objs, seg, longest, heap, live_id, state, selected_before, 
     shadow: SlotShadows; residual: Residual (residual_gather once a row's slots are
     written, residual_flush by batches); k_static = a tuple of K zeros if K is in
     STATIC_K, else (); residual_static = (0,) with the residual on (Config.residual), else
-    () (no residual is written). run: int64
-    object rows; visible, reset: bool [N]; live_id: int32 [L].
+    () (no residual is written). run: int64 object rows; visible, reset: bool [N];
+    live_id: int32 [L].
 
     DESIGN section 2, "Slots" (candidates), "Selection", "Fade", "slot_shadow[o, k]" and
     "Residual"; section 3 (the per-object outputs and their empty slots); section 6 (only

@@ -224,13 +224,13 @@ def update_pair_cache(plan: FramePlan, last: FrameState | None, pairs: Pairs,
     return cache
 
 
-def longest(seg: np.ndarray, rows: np.ndarray | None = None, bound: int = 0) -> int:
-    """PairCache.longest: the longest of the segments ``seg`` (at ``rows``; None: all),
-    or ``bound`` if longer. An incremental frame bounds its cache by last frame's bound
-    and the lists it rewrote (a bound that only shrinks at a full frame), so the object
-    pass need not scan its rows' lengths."""
+def longest(seg: np.ndarray, rows: np.ndarray | None = None) -> int:
+    """The longest of the segments ``seg`` (at ``rows``; None: all), for PairCache.longest.
+    An incremental frame bounds its cache by last frame's bound and the lists it rewrote
+    (a bound that only shrinks at a full frame), so the object pass need not scan its
+    rows' lengths."""
     lengths = seg[:, 1] if rows is None else seg[rows, 1]
-    return max(bound, int(lengths.max(initial=0)))
+    return int(lengths.max(initial=0))
 
 
 def _from_candidates(pairs: Pairs, packed: Packed, n: int, buffers: Buffers) -> PairCache:
@@ -286,7 +286,7 @@ def _from_lists(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: Shadow
         # fit, or would leave the heap mostly garbage): that frame then writes into room
         # it knows it has, without a failed try.
         seg, heap, used = _room(buffers, seg, heap, used, n_pairs, need)
-    return PairCache(seg, heap, used, n_pairs, longest(seg, rows, c.longest), run,
+    return PairCache(seg, heap, used, n_pairs, max(c.longest, longest(seg, rows)), run,
                      f"cache kept; the lists of {rows.size} objects made again from their "
                      f"candidates; {run.size} of {np.count_nonzero(vis.objects)} visible "
                      "objects recomputed (in reach of changed lights or of lights whose "
@@ -366,7 +366,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
                              w_start, w_pairs, used))
     used = int(replace_lists(rows1, mode1, seg, heap, walked, kept, o_start, o_pairs, used))
     n_pairs += sum(int(seg[rows, 1].sum()) for rows in rewritten)
-    bound = longest(seg, rows1, longest(seg, rows2, c.longest))
+    bound = max(c.longest, longest(seg, rows1), longest(seg, rows2))
     return PairCache(seg, heap, used, n_pairs, bound, run,
                      f"cache kept; {scanned}; {run.size} of {np.count_nonzero(vis.objects)} "
                      "visible objects recomputed (pairs of changed lights, moved or newly "
