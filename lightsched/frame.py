@@ -14,6 +14,7 @@ from typing import Any
 
 import numba as nb
 import numpy as np
+from numba import literal_unroll
 
 from .fields import FIELDS, FIELDS_BY_NAME, PER_OBJECT_NAMES, axis_size
 from .jit import OBJECT_CHUNK, PRANGE_ONLY
@@ -160,38 +161,42 @@ def row_words(a: np.ndarray) -> np.ndarray:
     return rows.view(np.uint8)
 
 
-def byte_rows(a: np.ndarray) -> np.ndarray:
-    """An [N, ...] C-contiguous array's rows as bytes, [N, row bytes] (N > 0), so that
-    arrays of every dtype go to copy_rows in one tuple."""
-    return a.reshape(a.shape[0], -1).view(np.uint8)
-
-
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _copy_rows_range(src, dst, rows, lo, hi):
     for i in range(lo, hi):
         r = rows[i]
-        for a in range(len(src)):
-            s, d = src[a], dst[a]
-            for w in range(s.shape[1]):
-                d[r, w] = s[r, w]
+        for w in range(src.shape[1]):
+            dst[r, w] = src[r, w]
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def copy_rows(src, dst, rows):
-    """dst[a][r] = src[a][r] for the rows ``rows`` (int64) of each pair of [N, W] byte
-    arrays (byte_rows) of the tuples ``src`` and ``dst``: an incremental frame's
-    per-object outputs (DESIGN section 3) keep last frame's rows where it does not write
-    them (DESIGN section 6). On the calling thread: a parallel launch costs more than a
-    few hundred rows (copy_rows_parallel for more)."""
-    _copy_rows_range(src, dst, rows, 0, rows.shape[0])
+def _as_rows(a):
+    return a.reshape((a.shape[0], -1))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def copy_rows(pairs, rows):
+    """dst[r] = src[r] for the rows ``rows`` (int64) of each (src, dst) pair of C-contiguous
+    [N] or [N, ...] arrays of the tuple ``pairs`` (each pair one dtype and shape): an
+    incremental frame's per-object outputs (DESIGN section 3) keep last frame's rows where
+    it does not write them (DESIGN section 6). On the calling thread: a parallel launch
+    costs more than a few hundred rows (copy_rows_parallel for more). The arrays go as
+    they are, each pair its own compiled loop (literal_unroll): viewing each as bytes
+    first cost more than the copy."""
+    for pair in literal_unroll(pairs):
+        _copy_rows_range(_as_rows(pair[0]), _as_rows(pair[1]), rows, 0, rows.shape[0])
 
 
 @nb.njit(cache=True, nogil=True, parallel=PRANGE_ONLY, error_model="numpy")
-def copy_rows_parallel(src, dst, rows):
-    """copy_rows with the rows split between the threads, OBJECT_CHUNK rows a work item."""
+def copy_rows_parallel(pairs, rows):
+    """copy_rows with the rows split between the threads, OBJECT_CHUNK rows a work item
+    (a parallel loop per array: numba's parallel loops take no tuples of arrays)."""
     n = rows.shape[0]
-    for ch in nb.prange((n + OBJECT_CHUNK - 1) // OBJECT_CHUNK):
-        _copy_rows_range(src, dst, rows, ch * OBJECT_CHUNK, min(n, (ch + 1) * OBJECT_CHUNK))
+    for pair in literal_unroll(pairs):
+        src, dst = _as_rows(pair[0]), _as_rows(pair[1])
+        for ch in nb.prange((n + OBJECT_CHUNK - 1) // OBJECT_CHUNK):
+            _copy_rows_range(src, dst, rows, ch * OBJECT_CHUNK,
+                             min(n, (ch + 1) * OBJECT_CHUNK))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -59,11 +59,12 @@ def fresh_object_pairs(rows: np.ndarray, objects: ObjectStore, packed: Packed,
     recs = Records(box, box.view(np.uint32 if frame[1] else np.uint64), rows)
     visible_objects(objects.bounds_min, objects.bounds_max, objects.mask, rows, rows.size,
                     recs, frame[0])
-    compete, is_dir = packed.compete, packed.is_dir
-    dir_rows = np.flatnonzero(compete & is_dir)
+    compete, dir_all = packed.compete, packed.dir_all
+    dir_rows = dir_all[compete[dir_all]]
     if cells is not None:
         return grid_pairs(recs, packed.rows, compete, cells, dir_rows, params, len(objects))
-    point_rows = np.flatnonzero(compete & ~is_dir).astype(np.int32)
+    point_rows = np.flatnonzero(compete & ~packed.is_dir if dir_all.size else compete
+                                ).astype(np.int32)
     return direct_pairs(recs, packed.rows, compete, point_rows, dir_rows, params,
                         len(objects))
 

@@ -16,7 +16,6 @@ from .buffers import Buffers, SpareOutputs, read_only_view
 from .fade import fade_object, held_slots, steady_slots
 from .frame import (
     PER_OBJECT,
-    byte_rows,
     copy_rows,
     copy_rows_parallel,
     field_shape,
@@ -557,12 +556,12 @@ def _outputs(last: FrameState | None, written: np.ndarray | None, n: int, k: int
                 for name, arr in spare.arrays.items():
                     np.copyto(arr, getattr(last.frame, name))
             elif lag.size:
-                src = tuple(byte_rows(getattr(last.frame, name)) for name in spare.arrays)
-                dst = tuple(byte_rows(arr) for arr in spare.arrays.values())
-                row_bytes = sum(a.shape[1] for a in dst)
+                pairs = tuple((getattr(last.frame, name), arr)
+                              for name, arr in spare.arrays.items())
+                row_bytes = sum(arr.strides[0] for arr in spare.arrays.values())
                 copy = (copy_rows_parallel if lag.size * row_bytes > tuning.parallel_copy_bytes
                         else copy_rows)
-                copy(src, dst, lag)
+                copy(pairs, lag)
             return spare.arrays, None
         return spare.arrays, spare.visible if spare.visible.shape == (n,) else None
     if written is None:

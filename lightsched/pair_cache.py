@@ -138,20 +138,25 @@ def replace_lists(rows, mode, seg, heap, walked, kept, fresh_start, fresh, used)
     from ``scan_pairs``; all of them if kept is empty) followed by its fresh pairs (lights
     that changed were walked again). The cache, seg [N, 2] (start, length) and heap
     (group.PairHeap), is updated in place; the fresh pairs are grouped by object row:
-    object o's at fresh[fresh_start[o]:fresh_start[o+1]] (a PairHeap). DESIGN section 6
-    (the pair cache of an incremental frame)."""
+    object o's at fresh[fresh_start[o]:fresh_start[o+1]] (a PairHeap). Returns (records
+    used, the pairs the rows' lists held, the pairs they hold now, the longest new list),
+    which the cache's counts follow. DESIGN section 6 (the pair cache of an incremental
+    frame)."""
     heap_p, heap_j = heap.p, heap.light_row
     f_start, f_p, f_j = fresh_start, fresh.p, fresh.light_row
     at = np.empty(rows.shape[0] + 1, np.int64)
     at[0] = used
+    held = longest = 0
     for r in range(rows.shape[0]):
         o = rows[r]
+        held += seg[o, 1]
         size = 0
         if mode[r] == 2:
             size = kept[o] if kept.size else seg[o, 1]
         if mode[r] != 0:
             size += f_start[o + 1] - f_start[o]
         at[r + 1] = at[r] + size
+        longest = max(longest, size)
     for r in nb.prange(rows.shape[0]):
         o = rows[r]
         d = at[r]
@@ -168,7 +173,7 @@ def replace_lists(rows, mode, seg, heap, walked, kept, fresh_start, fresh, used)
                 d += 1
         seg[o, 0] = at[r]
         seg[o, 1] = d - at[r]
-    return at[rows.shape[0]]
+    return at[rows.shape[0]], held, at[rows.shape[0]] - used, longest
 
 
 # --------------------------------------------------------------------------- the lists stage
@@ -359,15 +364,13 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
     seg, heap, used = _room(buffers, c.seg, c.heap, c.used, c.pairs,
                             w_pairs.p.size + int(c.seg[rows2, 1].sum()) + o_pairs.p.size)
     walked = (flag & WALKED) != 0
-    # The cache's pairs follow from the rewritten lists' lengths.
-    rewritten = (rows1, rows2)
-    n_pairs = c.pairs - sum(int(seg[rows, 1].sum()) for rows in rewritten)
-    used = int(replace_lists(rows2, np.full(rows2.size, 2, np.int8), seg, heap, walked, kept,
-                             w_start, w_pairs, used))
-    used = int(replace_lists(rows1, mode1, seg, heap, walked, kept, o_start, o_pairs, used))
-    n_pairs += sum(int(seg[rows, 1].sum()) for rows in rewritten)
-    bound = max(c.longest, longest(seg, rows1), longest(seg, rows2))
-    return PairCache(seg, heap, used, n_pairs, bound, run,
+    # The cache's pairs and bound follow from the rewritten lists' lengths.
+    used, held2, now2, longest2 = replace_lists(rows2, np.full(rows2.size, 2, np.int8), seg,
+                                                heap, walked, kept, w_start, w_pairs, used)
+    used, held1, now1, longest1 = replace_lists(rows1, mode1, seg, heap, walked, kept, o_start,
+                                                o_pairs, used)
+    n_pairs = c.pairs - held1 - held2 + now1 + now2
+    return PairCache(seg, heap, used, n_pairs, max(c.longest, longest1, longest2), run,
                      f"cache kept; {scanned}; {run.size} of {np.count_nonzero(vis.objects)} "
                      "visible objects recomputed (pairs of changed lights, moved or newly "
                      "visible objects, shadow-map changes, fading slots"

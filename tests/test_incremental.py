@@ -21,7 +21,7 @@ import lightsched as ls
 import lightsched.objects
 from lightsched.buffers import Buffers
 from lightsched.candidates import LightLists, compact_light_lists, reached_rows, widen_walkers
-from lightsched.frame import byte_rows, copy_rows, copy_rows_parallel, rows_not_in
+from lightsched.frame import copy_rows, copy_rows_parallel, rows_not_in
 from lightsched.grid import Records, shown_mask, visible_objects
 from lightsched.scenes import city, move_lights
 from lightsched.simd import SHOWN
@@ -1114,8 +1114,8 @@ def test_the_rows_of_a_lists_frame_are_those_of_their_masks(seed, n, share):
        share=st.sampled_from([0.0, 0.02, 0.45, 1.0]))
 def test_copy_rows_copies_the_given_rows_of_every_array_and_nothing_else(seed, n, share):
     """copy_rows and copy_rows_parallel (the output rows an incremental frame keeps from
-    last frame's, DESIGN section 6) on arrays of each per-object output's dtype and shape,
-    as bytes: the given rows are the source's, bit for bit, every other row untouched."""
+    last frame's, DESIGN section 6) on arrays of each per-object output's dtype and shape:
+    the given rows are the source's, bit for bit, every other row untouched."""
     rng = np.random.default_rng(seed)
     shapes = [((n, 8), np.int32), ((n, 8), np.float32), ((n, 8), np.uint8), ((n,), np.int32),
               ((n, 8), np.int8), ((n, 4), np.float32), ((n, 3), np.float64)]
@@ -1133,6 +1133,6 @@ def test_copy_rows_copies_the_given_rows_of_every_array_and_nothing_else(seed, n
             e[rows] = a[rows]
         for a in src:
             a.setflags(write=False)
-        copy(tuple(byte_rows(a) for a in src), tuple(byte_rows(d) for d in dst), rows)
+        copy(tuple(zip(src, dst, strict=True)), rows)
         for d, e in zip(dst, expect, strict=True):
             assert d.tobytes() == e.tobytes()
