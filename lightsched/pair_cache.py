@@ -234,8 +234,18 @@ def longest(seg: np.ndarray, rows: np.ndarray | None = None) -> int:
     An incremental frame bounds its cache by last frame's bound and the lists it rewrote
     (a bound that only shrinks at a full frame), so the object pass need not scan its
     rows' lengths."""
-    lengths = seg[:, 1] if rows is None else seg[rows, 1]
-    return int(lengths.max(initial=0))
+    if rows is None:
+        return int(seg[:, 1].max(initial=0))
+    return int(_longest_at(seg, rows))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _longest_at(seg, rows):
+    """max(seg[rows, 1], 0) without the gathered copy. DESIGN section 6 (the pair cache)."""
+    m = 0
+    for o in rows:
+        m = max(m, seg[o, 1])
+    return m
 
 
 def _from_candidates(pairs: Pairs, packed: Packed, n: int, buffers: Buffers) -> PairCache:
