@@ -45,6 +45,7 @@ from .select import (
     I_OLD_ST,
     I_ROW,
     I_ROWS,
+    gather_few,
     gather_live,
     match_old_slots,
     top_k,
@@ -233,9 +234,8 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
                     all_on &= (lid < 0) | (s_st[o, m] == ON)
                 if b - a <= k:
                     # Every competing light is selected: gathered straight into the
-                    # selection's rows (the pool's), no keys, no ranking.
-                    cand = gather_live(heap_p, heap_j, live_id, a, b, sf, si)
-                    match_old_slots(sf, si, cand, sf, si)
+                    # selection's rows, no keys, no ranking.
+                    cand = gather_few(heap_p, heap_j, live_id, a, b, sf, si)
                     nbest = cand
                 else:
                     cand = gather_live(heap_p, heap_j, live_id, a, b, cf, ci)

@@ -41,9 +41,7 @@ I_ROWS = 10
 # The object's pool of competing lights, one column a light: float64 cf[CF_ROWS, n] and int64
 # ci[CI_ROWS, n], n at most its pair count. CF_P, CI_ID, CI_ROW: the live lights gathered;
 # CF_KEY: their keys; CF_S_*, CI_S_*: the lights kept for ranking; CF_T_P, CI_T_*: the
-# ranked ones at their places (column K takes every place past K). The gathered rows are
-# the selection's rows of sf, si (F_P, I_ID, I_ROW), so that when every pair fits in K the
-# object's scratch serves as its pool.
+# ranked ones at their places (column K takes every place past K).
 CF_KEY, CF_P, CF_S_KEY, CF_S_P, CF_T_P = F_KEY, F_P, 2, 3, 4
 CF_ROWS = 5
 CI_ID, CI_ROW, CI_S_ID, CI_S_ROW, CI_T_ID, CI_T_ROW = I_ID, I_ROW, 2, 3, 4, 5
@@ -99,6 +97,35 @@ def match_old_slots(cf, ci, n, sf, si):
         if at >= 0:
             sf[F_OLD_P, m] = cf[CF_P, at]
             si[I_OLD_ROW, m] = ci[CI_ROW, at]
+
+
+@nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def gather_few(heap_p, heap_j, live_id, a, b, sf, si):
+    """gather_live and match_old_slots in one pass, for an object whose b - a <= K pairs
+    all fit in its selection: the live lights into F_P, I_ID, I_ROW of sf, si in pair
+    order, and each old slot's light (I_OLD_ID) found there its P and row (F_OLD_P,
+    I_OLD_ROW); returns how many are live. The common case of a sparse scene: with so
+    few pairs the branch on a light's liveness predicts well, and K compares a light cost
+    less than match_old_slots' K sums over the pool, loops of a few lanes that AVX-512
+    code runs masked (bench/RESULTS.md, issue 48). DESIGN section 2, "Slots"."""
+    n = 0
+    for t in range(a, b):
+        j = np.int64(heap_j[t])
+        lid = np.int64(live_id[j])
+        if lid >= 0:
+            p = heap_p[t]
+            # Compares only inside the loop (it vectorises); the one store after it.
+            slot = -1
+            for m in range(sf.shape[1]):
+                slot = m if si[I_OLD_ID, m] == lid else slot
+            if slot >= 0:
+                sf[F_OLD_P, slot] = p
+                si[I_OLD_ROW, slot] = j
+            sf[F_P, n] = p
+            si[I_ID, n] = lid
+            si[I_ROW, n] = j
+            n += 1
+    return n
 
 
 @nb.njit(cache=True, nogil=True, inline="always", error_model="numpy")

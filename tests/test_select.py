@@ -3,7 +3,8 @@ from last frame's selection, ranking by counts or, past RANK_COUNT_MAX kept ligh
 insertion) == the rule of DESIGN section 2, "Selection", written here as a sort: the K of
 highest key, ties to the lower id, key = P or P + h|P| + h_abs for last frame's selected
 lights. Pools with and without the bound (all of last frame's selection competing or not),
-few and many lights, and many ties."""
+few and many lights, and many ties. select.gather_few (an object's few pairs gathered and
+its old slots matched in one pass) == gather_live then match_old_slots."""
 
 from __future__ import annotations
 
@@ -19,12 +20,18 @@ from lightsched.select import (
     CI_ID,
     CI_ROW,
     CI_ROWS,
+    F_OLD_P,
     F_P,
     F_ROWS,
     I_ID,
+    I_OLD_ID,
+    I_OLD_ROW,
     I_ROW,
     I_ROWS,
     RANK_COUNT_MAX,
+    gather_few,
+    gather_live,
+    match_old_slots,
     top_k,
 )
 
@@ -85,3 +92,47 @@ def test_top_k_is_the_selection_rule(case) -> None:
     np.testing.assert_array_equal(got_ids, ids[order])
     np.testing.assert_array_equal(got_p, p[order])
     np.testing.assert_array_equal(got_rows, rows[order])
+
+
+@nb.njit
+def _gathered(heap_p, heap_j, live_id, old_ids, few):
+    k = old_ids.size
+    sf = np.full((F_ROWS, k), np.nan)
+    si = np.full((I_ROWS, k), -9, np.int64)
+    si[I_OLD_ID, :] = old_ids
+    si[I_OLD_ROW, :] = -1
+    if few:
+        n = gather_few(heap_p, heap_j, live_id, 0, heap_p.size, sf, si)
+    else:
+        cf = np.full((CF_ROWS, heap_p.size), np.nan)
+        ci = np.full((CI_ROWS, heap_p.size), -9, np.int64)
+        n = gather_live(heap_p, heap_j, live_id, 0, heap_p.size, cf, ci)
+        match_old_slots(cf, ci, n, sf, si)
+        sf[F_P, :n] = cf[CF_P, :n]
+        si[I_ID, :n] = ci[CI_ID, :n]
+        si[I_ROW, :n] = ci[CI_ROW, :n]
+    return n, sf, si
+
+
+@examples(1.0)
+@given(k=st.sampled_from([1, 2, 4, 8]), data=st.data())
+def test_gather_few_is_gather_live_and_match_old_slots(k, data) -> None:
+    n_l = data.draw(st.integers(1, 3 * k))
+    live_id = np.array(data.draw(st.lists(st.sampled_from([-2, 0]), min_size=n_l,
+                                          max_size=n_l)), np.int32)
+    live_id[live_id == 0] = np.flatnonzero(live_id == 0) * 5 + 7
+    rows = data.draw(st.lists(st.integers(0, n_l - 1), min_size=0, max_size=k, unique=True))
+    heap_j = np.array(rows, np.int32)
+    heap_p = np.array(data.draw(st.lists(priority, min_size=len(rows), max_size=len(rows))))
+    # Last frame's slots: lights of the pool or gone (999...), filled ones first.
+    held = data.draw(st.lists(st.sampled_from(live_id[live_id >= 0].tolist() + [999, 1000]),
+                              max_size=k, unique=True))
+    old_ids = np.array(held + [-1] * (k - len(held)), np.int64)
+    n, sf, si = _gathered(heap_p, heap_j, live_id, old_ids, True)
+    n_ref, sf_ref, si_ref = _gathered(heap_p, heap_j, live_id, old_ids, False)
+    assert n == n_ref == np.count_nonzero(live_id[heap_j] >= 0)
+    # The gathered lights, then each old slot's match (NaN P where none: unwritten).
+    np.testing.assert_array_equal(sf[F_P, :n], sf_ref[F_P, :n])
+    np.testing.assert_array_equal(si[[I_ID, I_ROW], :n], si_ref[[I_ID, I_ROW], :n])
+    np.testing.assert_array_equal(sf[F_OLD_P], sf_ref[F_OLD_P])
+    np.testing.assert_array_equal(si[I_OLD_ROW], si_ref[I_OLD_ROW])
