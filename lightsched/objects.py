@@ -157,21 +157,26 @@ def object_pass(run, objs, seg, longest, heap, live_id, state, selected_before, 
     n_chunks = (n_run + OBJECT_CHUNK - 1) // OBJECT_CHUNK
     held_rules = (shadow_of_row, np.int64(max_shadowed) if any_shadow else np.int64(0),
                   params.hysteresis, params.hysteresis_abs, params.fade_in_step, params.fade_in)
+    # (As a tuple: a NamedTuple cannot cross into the prange by itself.)
+    empty = residual_batch(0, False)
+    idle = (empty.objects, empty.start, empty.keys, empty.rho)
     for ch in nb.prange(n_chunks):
         # A call a chunk: the rows' code is inlined in it, where numba's parallel analysis
         # of a prange body cannot follow it, and a call a row would count the references
         # of its arrays atomically, on lines both threads write.
         _object_chunk(run, ch * OBJECT_CHUNK, min(n_run, (ch + 1) * OBJECT_CHUNK), objs, seg,
                       longest, heap, live_id, state, selected_before, out, params, held_rules,
-                      residual, k_static, residual_static)
+                      residual, k_static, residual_static, idle)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, selected_before,
-                  out, params, held_rules, residual, k_static, residual_static):
+                  out, params, held_rules, residual, k_static, residual_static, idle):
     """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
     how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
-    dt/fade_in, fade_in); the others as object_pass's."""
+    dt/fade_in, fade_in); idle: the arrays of the ResidualBatch a chunk takes with the
+    residual off (one for the pass: a chunk's allocations add up over a frame's ~400 chunks); the
+    others as object_pass's."""
     visible, reset = objs
     heap_p, heap_j = heap.p, heap.light_row
     s_id, s_w, s_st, s_sel = state.light_ids, state.weight, state.state, state.selected
@@ -202,7 +207,7 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
     # before the residual. (An empty tuple inside the Residual NamedTuple cannot cross into
     # the prange.)
     on = len(residual_static) > 0
-    batch = residual_batch(pool_size, on)
+    batch = residual_batch(pool_size, on) if on else ResidualBatch(*idle)
     in_batch = 0
     for r in range(first, end):
         o = run[r]
