@@ -175,8 +175,8 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
     """object_pass on run[first:end]; held_rules: simd.held_row's rules (shadow_of_row,
     how many slots may take a map: 0 when no light has one, h, hysteresis_abs,
     dt/fade_in, fade_in); idle: the arrays of the ResidualBatch a chunk takes with the
-    residual off (one for the pass: a chunk's allocations add up over a frame's ~400 chunks); the
-    others as object_pass's."""
+    residual off (one for the pass: four allocations a chunk add up over a frame's
+    chunks); the others as object_pass's."""
     visible, reset = objs
     heap_p, heap_j = heap.p, heap.light_row
     s_id, s_w, s_st, s_sel = state.light_ids, state.weight, state.state, state.selected
