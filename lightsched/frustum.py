@@ -93,13 +93,15 @@ class CameraFrames:
 @dataclass(slots=True)
 class Cameras:
     """The cameras stage's output: every parameter of the cameras as one key
-    (changes.camera_key), their frames and cascade_splits, and whether they differ from
-    last frame's (if not, last frame's frames and splits are these)."""
+    (changes.camera_key), their frames and cascade_splits, whether they differ from last
+    frame's (if not, last frame's frames and splits are these), and the frame's
+    camera_ids (int32: last frame's array while they are the same ids)."""
 
     key: np.ndarray
     frames: CameraFrames
     splits: np.ndarray
     moved: bool
+    ids: np.ndarray
 
 
 def frame_cameras(cameras: list[Camera], last: Cameras | None, cascades: int,
@@ -108,9 +110,17 @@ def frame_cameras(cameras: list[Camera], last: Cameras | None, cascades: int,
     when they did not move."""
     key = camera_key(cameras)
     if last is not None and same_key(key, last.key):
-        return Cameras(key, last.frames, last.splits, False)
+        return Cameras(key, last.frames, last.splits, False, last.ids)
+    ids = camera_ids(cameras)
+    if last is not None and ids.tobytes() == last.ids.tobytes():
+        ids = last.ids
     return Cameras(key, CameraFrames(cameras),
-                   cascade_splits(cameras, cascades, shadow_distance), True)
+                   cascade_splits(cameras, cascades, shadow_distance), True, ids)
+
+
+def camera_ids(cameras: list[Camera]) -> np.ndarray:
+    """The ids the frame runs with: a camera's own, or its position in the list."""
+    return np.array([k if c.id is None else int(c.id) for k, c in enumerate(cameras)], np.int32)
 
 
 def cascade_splits(cameras: list[Camera], cascades: int, shadow_distance: float) -> np.ndarray:

@@ -277,8 +277,7 @@ def _from_lists(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: Shadow
     candidates."""
     cands, reach = pairs.candidates, pairs.reach
     old = last.shadows
-    reselect = np.flatnonzero((shadows.live != old.live)
-                              | (shadows.shadow_of_row != old.shadow_of_row))
+    reselect = np.flatnonzero(shadows.reselect(old))
     list_objects(cands.by_light, reselect, reach)
     # The visibility is last frame's: an object out of view has no pairs. (As bytes: the
     # kernel's loop on bools is slower.)
@@ -321,7 +320,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
     n = vis.objects.size
     flag = np.zeros(shadows.live.size, np.uint8)
     flag[pairs.walked] |= WALKED
-    flag[(shadows.live != old.live) | (shadows.shadow_of_row != old.shadow_of_row)] |= RESELECT
+    flag[shadows.reselect(old)] |= RESELECT
     flagged = np.flatnonzero(flag)
     near = (_near_rows(plan, c, flagged, light_rows, packed, grid, pairs.params, tuning,
                        buffers) if flagged.size else None)
@@ -337,7 +336,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
         scanned = "no light flagged"
     fresh = pairs.lights
     few = int(fresh.count.sum()) <= tuning.few_pairs * n
-    rows1 = np.union1d(vis.fresh, vis.left)
+    rows1 = vis.renewed
     if few:
         w_obj, w_pairs = group_few(fresh)
     else:
@@ -367,8 +366,7 @@ def _patch(plan: FramePlan, last: FrameState, pairs: Pairs, shadows: ShadowSet,
         w_start = start_at(rows2, w_obj, n)
     # replace_lists' modes: 2 (rows2) the kept pairs and the walk's, 1 the new lists of
     # moved or newly visible objects, 0 none for those that left the view.
-    mode1 = np.ones(rows1.size, np.int8)
-    mode1[np.searchsorted(rows1, vis.left)] = 0
+    mode1 = vis.objects[rows1].view(np.int8)
     o_start, o_pairs = pairs.objects
     # The cache is this frame's to change.
     seg, heap, used = _room(buffers, c.seg, c.heap, c.used, c.pairs,

@@ -171,11 +171,6 @@ class ShadowViews:
     how: str
 
 
-def camera_ids(cameras: list[Camera]) -> np.ndarray:
-    """The ids the frame runs with: a camera's own, or its position in the list."""
-    return np.array([k if c.id is None else int(c.id) for k, c in enumerate(cameras)], np.int32)
-
-
 def first_fit(tiles: list[tuple[int, int, int]], atlas: int, size: int
               ) -> tuple[int, int] | None:
     """Lowest square of ``size`` in Morton order (quadrants x first: (0, 0), (1, 0),
@@ -681,20 +676,20 @@ def update_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
     its output and the ShadowSet the rest of the frame uses: slot_shadow samples only
     lights whose views are all ready, and with unshadowed = "skip" a shadow light with a
     view not ready lights nothing. The rules are view_pass'."""
-    ids_cam = camera_ids(cameras)
     if shadows.rows.size == 0 and (last is None or (last.memory.key.shape[0] == 0
                                                     and not last.tiles)):
-        if last is not None and last.placement is None and np.array_equal(last.camera_ids,
-                                                                          ids_cam):
+        # (The cameras stage keeps last frame's ids array while the ids are the same.)
+        if last is not None and last.placement is None and last.camera_ids is cams.ids:
             return last, shadows
-        return _no_views(ids_cam, cams.splits.shape[1]), shadows
-    return run_views(last, shadows, casters, lights, objects, cams, cameras, ids_cam, config)
+        return _no_views(cams.ids, cams.splits.shape[1]), shadows
+    return run_views(last, shadows, casters, lights, objects, cams, cameras, config)
 
 
 def run_views(last: ShadowViews | None, shadows: ShadowSet, casters: Casters,
               lights: LightStore, objects: ObjectStore, cams: Cameras, cameras: list[Camera],
-              ids_cam: np.ndarray, config: Config) -> tuple[ShadowViews, ShadowSet]:
+              config: Config) -> tuple[ShadowViews, ShadowSet]:
     """update_views' general case: the atlas tiles, then view_pass."""
+    ids_cam = cams.ids
     types = lights.type[shadows.rows]
     tiles, rect, moved = _tiles(last, shadows, types, config.shadow_atlas_size)
     cam_state = _camera_states(cameras, cams)
@@ -758,5 +753,5 @@ def sampled(shadows: ShadowSet, ready: np.ndarray, lights: LightStore, config: C
 
 
 __all__ = ["MIN_TIER", "NamedIds", "ShadowViews", "ViewCameras", "ViewCasters", "ViewLights",
-           "ViewMemory", "ViewObjects", "ViewPass", "allocate_tiles", "camera_ids",
-           "empty_memory", "first_fit", "run_views", "sampled", "update_views", "view_pass"]
+           "ViewMemory", "ViewObjects", "ViewPass", "allocate_tiles", "empty_memory",
+           "first_fit", "run_views", "sampled", "update_views", "view_pass"]

@@ -51,6 +51,14 @@ class ShadowSet:
     ranked_tier: np.ndarray
     importance: np.ndarray
 
+    def reselect(self, old: ShadowSet) -> np.ndarray:
+        """Per light row whether its objects select again since ``old`` (last frame's
+        set): it became live or stopped being, or its shadow map changed."""
+        changed = self.live != old.live
+        if self.shadow_of_row is not old.shadow_of_row:
+            changed |= self.shadow_of_row != old.shadow_of_row
+        return changed
+
     @property
     def how(self) -> str:
         return (f"{self.rows.size} of {self.candidates} candidates shadowed (ranking, tiers, "
@@ -85,8 +93,12 @@ def choose_shadows(last: ShadowSet | None, lights: LightStore, frames: CameraFra
             kept, fitted = fit_atlas(views.tolist(), ranked.tolist(), config.shadow_atlas_size)
             rows, ranked, importance = rows[:kept], ranked[:kept], importance[:kept]
             tier = np.array(fitted, np.uint16)
-    shadow_of_row = np.full(len(lights), -1, np.int8)
-    shadow_of_row[rows] = np.arange(rows.size)
+    none_before = last is not None and last.rows.size == 0
+    if none_before and rows.size == 0 and last.shadow_of_row.size == len(lights):
+        shadow_of_row = last.shadow_of_row  # (every row -1, as last frame's)
+    else:
+        shadow_of_row = np.full(len(lights), -1, np.int8)
+        shadow_of_row[rows] = np.arange(rows.size)
     live = visible.copy()
     if config.unshadowed == "skip":
         # A shadowed light without a shadow map affects nothing (it would leak through
@@ -100,7 +112,8 @@ def choose_shadows(last: ShadowSet | None, lights: LightStore, frames: CameraFra
         dir_rows = dir_rows[np.lexsort((lights.id[dir_rows], -dir_p))]
     ids = lights.id[rows]
     # (At most shadow_budget <= 127 ids: Python's sort, not numpy's calls.)
-    settled = sorted([] if last is None else last.ids.tolist()) == sorted(ids.tolist())
+    settled = (rows.size == 0 if none_before else
+               sorted([] if last is None else last.ids.tolist()) == sorted(ids.tolist()))
     return ShadowSet(rows, ids, tier, int(np.count_nonzero(candidate)), shadow_of_row, live,
                      lights.id[dir_rows].astype(np.int32), settled, ranked, importance)
 

@@ -39,7 +39,8 @@ class Visibility:
     objects (it only sets a grid's extent, so it may be larger); ``flipped``: the rows
     whose flag differs from last frame's; ``fresh``: the visible rows that need new pairs
     (they moved or came into view) and ``left`` the rows that left the view, in an
-    incremental frame (empty in a full one, which pairs every object); ``groups``: (grid
+    incremental frame (empty in a full one, which pairs every object), and ``renewed``
+    both (ascending: the rows whose pair lists are replaced); ``groups``: (grid
     positions, class per group) of a pass over a grid of every object's groups, for the
     next such pass; ``how``: how the objects were tested, when the plan alone does not
     say."""
@@ -50,6 +51,7 @@ class Visibility:
     flipped: np.ndarray
     fresh: np.ndarray
     left: np.ndarray
+    renewed: np.ndarray
     groups: tuple[np.ndarray, np.ndarray] | None = None
     how: str = ""
 
@@ -83,16 +85,19 @@ def see(plan: FramePlan, last: FrameState | None, lights: LightStore, objects: O
     flipped = (np.flatnonzero(vis_o != last.visibility.objects)
                if last is not None and object_rows is not None
                and vis_o is not last.visibility.objects else NO_ROWS)
-    fresh = left = NO_ROWS
+    fresh = left = renewed = NO_ROWS
     if not plan.full and plan.visibility != "kept":
+        in_view = vis_o[flipped]
+        left = flipped[~in_view]
         if object_rows.size:
             moved = np.zeros(len(objects), np.bool_)
             moved[object_rows] = True
             fresh = np.flatnonzero(vis_o & (moved | ~last.visibility.objects))
+            # (Disjoint: fresh rows are in view, left ones not.)
+            renewed = np.sort(np.concatenate((fresh, left)))
         else:
-            fresh = flipped[vis_o[flipped]]
-        left = flipped[~vis_o[flipped]]
-    return Visibility(vis_l, vis_o, box, flipped, fresh, left, groups, how)
+            fresh, renewed = flipped[in_view], flipped
+    return Visibility(vis_l, vis_o, box, flipped, fresh, left, renewed, groups, how)
 
 
 def _by_groups(last: FrameState, lo: np.ndarray, hi: np.ndarray,

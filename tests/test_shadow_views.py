@@ -463,7 +463,7 @@ def test_patched_and_kept_caster_lists_match_oracle(seed, culling, tuning):
 def test_no_shadow_light_skips_the_view_pass_with_its_result():
     """With no shadow light and no view remembered the views stage skips view_pass: what it
     gives instead is what the pass gives (run_views, the general case, on the same frame)."""
-    from lightsched.shadow_views import camera_ids, run_views
+    from lightsched.shadow_views import run_views
 
     scene = Scene(3)
     scene.lights["shadows"] = np.zeros(scene.n_lights, bool)
@@ -476,7 +476,7 @@ def test_no_shadow_light_skips_the_view_pass_with_its_result():
         assert last is not None and frame.stats["plan"]["views"] == "skipped: no shadow lights"
         quick = last.views
         general, seen = run_views(None, last.shadows, last.casters, s.lights, s.objects,
-                                  last.cameras, cams, camera_ids(cams), s.config)
+                                  last.cameras, cams, s.config)
         assert seen is last.shadows
         for field in ("views", "dirty", "static_dirty", "update", "rect", "camera_ids",
                       "ready"):
