@@ -6,6 +6,7 @@ shadowed slots (shadows.pick_slot_shadows), outputs out.
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -73,6 +74,7 @@ WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
 # Those of ObjectOutputs: all but the residual, which the pass writes through Residual
 # (simd.held_row takes ObjectOutputs as they are).
 PASS_WRITTEN = tuple(name for name in WRITTEN if name != "residual")
+_pass_outputs = operator.itemgetter(*PASS_WRITTEN)
 # The object pass's output arrays: PASS_WRITTEN (DESIGN section 3), each [N, K] or [N],
 # and ``fading`` bool [N], whether a slot of the object is fading in or out.
 ObjectOutputs = NamedTuple("ObjectOutputs", [(name, np.ndarray) for name in PASS_WRITTEN]
@@ -523,7 +525,7 @@ def select_and_fade(plan: FramePlan, last: FrameState | None, cache: PairCache,
                               buffers.scratch("res_id", n_l, np.int32)[:n_l])
         object_pass(run, (read_only_view(visible), reset), cache.seg, cache.longest, cache.heap,
                     live_id, state, selected_before,
-                    ObjectOutputs(*(out[name] for name in PASS_WRITTEN), fading), params,
+                    ObjectOutputs(*_pass_outputs(out), fading), params,
                     SlotShadows(shadows.shadow_of_row, int(config.max_shadowed_per_object)),
                     Residual(res_id, packed.rows.hot, packed.rows.f,
                              objects.bounds_min, objects.bounds_max, packed.origin,

@@ -41,6 +41,9 @@ if TYPE_CHECKING:
 
 CANDIDATES, LISTS, WALK, PATCH = "candidates", "lists", "walk", "patch"
 _NO_LIGHTS = np.zeros(0, np.int64)
+# The fresh pairs of no object: pair_cache.replace_lists reads the start of none, so N + 1
+# zeros (memory mapped anew each frame at 100k objects) are not needed.
+_NO_FRESH = (np.zeros(1, np.int64), PairHeap.empty(0))
 
 
 @dataclass(slots=True)
@@ -151,7 +154,7 @@ def _patch_pairs(last: FrameState, changed: np.ndarray, light_rows: np.ndarray,
     cells = last.pairs.light_grid if light_rows.size == 0 else None
     how = "tested against"
     if not fresh.size:
-        found = (np.zeros(len(objects) + 1, np.int64), PairHeap.empty(0))
+        found = _NO_FRESH
     elif fresh.size * n_point <= (
             tuning.direct_tests_per_light * n_point + len(objects) if cells is None
             else tuning.grid_tests_per_object * fresh.size):

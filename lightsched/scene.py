@@ -13,7 +13,6 @@ Directions are normalised here, once, so the fast path and the oracle see the sa
 from __future__ import annotations
 
 import contextlib
-import copy
 import math
 import operator
 from collections.abc import Iterable, Iterator
@@ -839,6 +838,13 @@ def _keep_mask(store: Any, ids: Any, what: str) -> np.ndarray:
     return keep
 
 
+def _shallow_copy(store: Any) -> Any:
+    """A store's shallow copy (what copy.copy gives, without its __reduce_ex__ round)."""
+    new = object.__new__(type(store))
+    new.__dict__.update(store.__dict__)
+    return new
+
+
 class SceneAPI:
     """The set_/update_/remove_/frame surface of DESIGN section 7, shared by the fast
     Scheduler and the oracle's; subclasses implement ``_frame``.
@@ -905,9 +911,9 @@ class SceneAPI:
     def snapshot(self) -> tuple[LightStore, ObjectStore]:
         """The scene as it is now, for ``restore``: shallow copies, as cheap as a few
         references, because no call changes a store's arrays in place."""
-        objects = copy.copy(self.objects)
+        objects = _shallow_copy(self.objects)
         objects.state = dict(self.objects.state)
-        return copy.copy(self.lights), objects
+        return _shallow_copy(self.lights), objects
 
     def restore(self, saved: tuple[LightStore, ObjectStore]) -> None:
         """Puts back a ``snapshot`` (the scene, not the frame state of frames since)."""
