@@ -18,7 +18,6 @@ import numpy as np
 from .fields import EXPLAIN_FIELDS, REASONS
 from .frame import Frame
 from .group import PairHeap
-from .objects import SAME_SELECTION
 from .priority import box_d2
 from .scene import DIRECTIONAL, FADING_OUT, Config, LightStore, ObjectStore, ValidationError
 
@@ -104,8 +103,7 @@ class ExplainRecord(NamedTuple):
     light_visible: per light row; seg, heap: the pair cache (PairCache); selected: per
     object row the lights selected this frame ([N, K], -1 padded); run: the rows the
     object pass ran on (ascending) and selected_before: their ``selected`` rows before it
-    (the other rows did not change; a row that starts with objects.SAME_SELECTION held the
-    same set of lights as now); held: the slots' lights when the frame began;
+    (the other rows did not change); held: the slots' lights when the frame began;
     was_visible, is_new: per object row, when the frame began."""
 
     frame_index: int
@@ -140,8 +138,6 @@ def explain_record(rec: ExplainRecord, object_id: Any) -> Explanation:
     i = int(np.searchsorted(rec.run, row))
     before = (rec.selected_before[i] if i < rec.run.size and rec.run[i] == row
               else rec.selected[row])
-    if before[0] == SAME_SELECTION:
-        before = rec.selected[row]
     prev_selected = {int(x) for x in before if x >= 0} if earlier else set()
     competing: dict[int, float] = {}
     if visible:

@@ -68,8 +68,6 @@ SORT_FEW = 16                # residual_gather sorts more lights than this with 
 RESIDUAL_TERMS = 4096        # a ResidualBatch's terms (more when one object has more pairs)
 # Residual.residual with the residual off: the pass writes none (of the type it has on).
 _NO_RESIDUAL = np.zeros((0, 4), np.float32)
-# selected_before's mark of a row whose selection did not change (object_pass).
-SAME_SELECTION = -2
 
 # Per-object outputs the objects stage writes ("visible" is the visibility array itself).
 WRITTEN = tuple(name for name in PER_OBJECT if name != "visible")
@@ -137,9 +135,7 @@ def object_pass(run, objs, seg, longest, heap, live_id, state, selected_before, 
     (``live_ids``; pairs of other lights are kept in the cache but do not compete); state:
     SlotState; selected_before: int32 [run.size, K], where the pass keeps each row's
     state.selected as it was before the pass (for explain; kept as the row is read, where
-    a copy apart cost a pass over memory), or SAME_SELECTION in the row's first column
-    where the slots were held (simd.held_row: the selection is the same set of lights as
-    last frame's, the slots'); out: ObjectOutputs; params: FadeParams;
+    a copy apart cost a pass over memory); out: ObjectOutputs; params: FadeParams;
     shadow: SlotShadows; residual: Residual (residual_gather once a row's slots are
     written, residual_flush by batches); k_static = a tuple of K zeros if K is in
     STATIC_K, else (); residual_static = (0,) with the residual on (Config.residual), else
@@ -217,6 +213,8 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
     in_batch = 0
     for r in range(first, end):
         o = run[r]
+        for m in range(k):
+            selected_before[r, m] = s_sel[o, m]
         cand = -1
         if k == LANES and visible[o] and not reset[o] and 0 < seg[o, 1] <= 2 * LANES:
             # The common case in vector code: slots held in last frame's order.
@@ -226,10 +224,7 @@ def _object_chunk(run, first, end, objs, seg, longest, heap, live_id, state, sel
                 o_count[o] = min(cand, k)
                 o_cand[o] = cand
                 summed = cand > k or o_fading[o]
-                selected_before[r, 0] = SAME_SELECTION
         if cand < 0:
-            for m in range(k):
-                selected_before[r, m] = s_sel[o, m]
             cnt = 0
             nbest = 0
             cand = 0

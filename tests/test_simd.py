@@ -30,7 +30,6 @@ from lightsched.grid import Records, visible_objects
 from lightsched.group import PairHeap
 from lightsched.jit import OBJECT_CHUNK, PRANGE_ONLY
 from lightsched.objects import (
-    SAME_SELECTION,
     FadeParams,
     ObjectOutputs,
     Residual,
@@ -249,13 +248,9 @@ def check_held(case, kinds, packings):
     got = copy.deepcopy((state, out, residual))
     object_pass(run, objs, seg, longest, heap, live_id, got[0], before[1], got[1], params,
                 shadow, got[2], k_static, (0,))
-    # The scalar path keeps every row's selection as it was before the pass; held_row marks
-    # its rows instead, whose selection is the same set of lights after the pass.
+    # Each path keeps every row's selection as it was before the pass.
     assert np.array_equal(before[0], state.selected[run])
-    same = before[1][:, 0] == SAME_SELECTION
-    assert np.array_equal(before[1][~same], state.selected[run][~same])
-    for r in np.flatnonzero(same):
-        assert set(state.selected[run[r]].tolist()) == set(got[0].selected[run[r]].tolist())
+    assert np.array_equal(before[1], state.selected[run])
     for w, g in zip(want[0] + want[1] + (want[2].residual,),
                     got[0] + got[1] + (got[2].residual,), strict=True):
         assert np.array_equal(w.view(np.uint8), g.view(np.uint8))
